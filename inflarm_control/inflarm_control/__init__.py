@@ -1,0 +1,1 @@
+"""Elastostatic inverse kinematics and PID + iterative learning pressure control."""

@@ -1,0 +1,1 @@
+"""Elastostatic load and pose estimation for the inflatable-link arm."""

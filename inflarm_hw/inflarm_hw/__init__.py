@@ -1,0 +1,1 @@
+"""Hardware bridges to motors and valves, and the simulated robots, camera and MCU."""

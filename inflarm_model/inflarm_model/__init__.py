@@ -1,0 +1,1 @@
+"""Kinematics and physics of the inflatable-link arm and the pneumatic soft arm."""

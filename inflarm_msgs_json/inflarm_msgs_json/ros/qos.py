@@ -1,0 +1,49 @@
+"""QoS profiles named by meaning, and event callbacks that make QoS mismatches visible."""
+
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+
+# Streams where the newest sample is all that matters (joint states, images, ball positions).
+SENSOR_QOS = qos_profile_sensor_data
+# Commands: reliable, only the newest is worth executing.
+COMMAND_QOS = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
+)
+# Results and reports that must all arrive (trial reports, estimates).
+RELIABLE_QOS = QoSProfile(
+    depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
+)
+# State that late joiners need (robot description, paths, obstacles).
+LATCHED_QOS = QoSProfile(
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    history=HistoryPolicy.KEEP_LAST,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+
+
+def subscription_events(node: Node, topic: str) -> SubscriptionEventCallbacks:
+    """Callbacks logging an incompatible publisher, which otherwise drops data silently."""
+    def on_incompatible(event) -> None:
+        node.get_logger().error(
+            f"subscription '{topic}': incompatible QoS offered by a publisher "
+            f'(policy {event.last_policy_kind}); no data will flow'
+        )
+    return SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
+
+
+def publisher_events(node: Node, topic: str) -> PublisherEventCallbacks:
+    """Callbacks logging an incompatible subscriber, which otherwise receives nothing."""
+    def on_incompatible(event) -> None:
+        node.get_logger().error(
+            f"publisher '{topic}': incompatible QoS requested by a subscriber "
+            f'(policy {event.last_policy_kind}); it will receive nothing'
+        )
+    return PublisherEventCallbacks(incompatible_qos=on_incompatible)

@@ -1,0 +1,1 @@
+"""A* path planning around cuboid obstacles for the pneumatic soft arm."""

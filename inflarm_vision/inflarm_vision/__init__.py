@@ -1,0 +1,1 @@
+"""Yellow-ball tracking in camera images."""

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Set up the workspace on a fresh machine, or bring it up to date: the virtual environment in
+# .venv/ with the pinned dependencies, then a colcon build into install/. Idempotent, and quick
+# when nothing changed (each step is skipped while its inputs hash the same).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$(pwd)
+
+python=${PYTHON:-python3.11}
+command -v "$python" >/dev/null 2>&1 || python=python3
+"$python" -c 'import sys; assert sys.version_info[:2] == (3, 11), sys.version' \
+  || { echo "setup: Python 3.11 is required (set PYTHON=...)" >&2; exit 1; }
+
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  "$python" -m venv .venv
+fi
+
+req_hash=$(sha256sum requirements.txt | cut -d' ' -f1)
+if [ "$(cat .venv/.requirements.sha256 2>/dev/null)" != "$req_hash" ]; then
+  echo "setup: installing requirements.txt into .venv"
+  .venv/bin/python -m pip install --quiet --upgrade pip
+  .venv/bin/python -m pip install --quiet -r requirements.txt
+  echo "$req_hash" > .venv/.requirements.sha256
+fi
+
+# --symlink-install links the Python sources, so editing a module needs no rebuild; only the
+# package metadata, entry points and installed data files do.
+packages=(inflarm_*/)
+build_hash=$(find "${packages[@]}" -type f \( -name setup.py -o -name setup.cfg \
+    -o -name package.xml -o -path '*/resource/*' -o -path '*/config/*' -o -path '*/schema/*' \) \
+    -print0 | sort -z | xargs -0 sha256sum | sha256sum | cut -d' ' -f1)
+mkdir -p log
+if [ "$(cat install/.build.sha256 2>/dev/null)" != "$build_hash" ]; then
+  echo "setup: colcon build"
+  .venv/bin/colcon --log-base log build --symlink-install --base-paths "${packages[@]}" \
+    --build-base build --install-base install --event-handlers console_cohesion- summary+ \
+    >log/colcon-build.txt 2>&1 || { cat log/colcon-build.txt >&2; exit 1; }
+  tail -n 1 log/colcon-build.txt
+  echo "$build_hash" > install/.build.sha256
+fi
+echo "setup: ready ($root)"
