@@ -18,7 +18,7 @@ setup(
     zip_safe=True,
     maintainer='inflarm developers',
     maintainer_email='dev@inflarm.org',
-    description='JSON messages carried in std_msgs/String, and the node conventions shared by the inflarm nodes.',
+    description='JSON messages in std_msgs/String, and the conventions shared by inflarm nodes.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
