@@ -21,6 +21,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'pressure_controller = inflarm_control.nodes.pressure_controller:main',
         ],
     },
 )

@@ -23,6 +23,7 @@ setup(
         'console_scripts': [
             'demo_joint_publisher = inflarm_hw.nodes.demo_joint_publisher:main',
             'joint_state_monitor = inflarm_hw.nodes.joint_state_monitor:main',
+            'sra_sim = inflarm_hw.nodes.sra_sim:main',
         ],
     },
 )

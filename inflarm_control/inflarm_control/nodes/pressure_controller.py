@@ -1,0 +1,327 @@
+"""PID + iterative learning control of the soft arm's chamber pressures (Fig 6 of 001_...).
+
+A trial drives the ball on the arm's end from where it is to a target at ``rate_hz``: every step
+takes the latest ball position, runs the three axis controllers and publishes the valve set
+pressures. After ``trial_duration_s`` the trial's outputs become the ILC memory of that target
+(seeding the next ``pid_ilc`` trial to it), a TrialReport is published, and the last pressures
+are held. Without a memory, a ``pid_ilc`` task is seeded from the experiential knowledge database
+(when one is configured). A planned path is followed waypoint by waypoint with PID (section 4.2).
+
+Subscribes:
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m].
+    control_task (std_msgs/String: ControlTask JSON, RELIABLE_QOS): start a trial.
+    planned_path (nav_msgs/Path, LATCHED_QOS): follow these waypoints, then hold the last.
+Publishes:
+    chamber_pressure_command (std_msgs/String: PressureCommand JSON, COMMAND_QOS) [Pa].
+    trial_report (std_msgs/String: TrialReport JSON, RELIABLE_QOS): per-axis RMSE, reach time.
+Services (std_srvs/Trigger):
+    ~/start_trial: repeat the last task as the next trial.
+    ~/stop: end the current trial without learning; the last pressures are held.
+    ~/reset_learning: forget every ILC memory (and the memory file).
+Parameters:
+    rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, quadrant_bellows (read-only),
+    trial_duration_s, measurement_timeout_s, reach_tolerance_m, path_tolerance_m,
+    ilc_memory_path, knowledge_db_path (read-only), frame_id (read-only).
+"""
+
+import math
+import os
+import time
+
+from geometry_msgs.msg import PointStamped
+from nav_msgs.msg import Path
+import numpy as np
+from rclpy.node import Node
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from inflarm_control.knowledge import KnowledgeDatabase, seed_memory
+from inflarm_control.pid_ilc import PidIlcController, PidIlcParams
+from inflarm_control.trial_metrics import TrialMetrics
+from inflarm_model.soft_arm import CHAMBERS, check_in_workspace
+from inflarm_msgs_json import ControlTask, MessageError, PressureCommand, TrialReport
+from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.qos import (
+    COMMAND_QOS,
+    LATCHED_QOS,
+    RELIABLE_QOS,
+    SENSOR_QOS,
+    publisher_events,
+    subscription_events,
+)
+from inflarm_msgs_json.ros.spin import spin_node
+
+_DEFAULTS = PidIlcParams()
+PARAMETERS = (
+    Parameter('rate_hz', _DEFAULTS.rate_hz, 'control rate [Hz] (paper: about 5 Hz)',
+              range=(0.5, 100.0), read_only=True),
+    Parameter('gains.kp', list(_DEFAULTS.kp), 'K_P of eq. 1 per axis x, y, z [Pa/m]',
+              read_only=True),
+    Parameter('gains.ki', list(_DEFAULTS.ki), 'K_I of eq. 1 per axis [Pa/(m s)]', read_only=True),
+    Parameter('gains.kd', list(_DEFAULTS.kd), 'K_D of eq. 1 per axis [Pa s/m]', read_only=True),
+    Parameter('limits.p_set_pa', list(_DEFAULTS.p_set),
+              'P_set of eq. 4 per axis: cap of the learned feedforward [Pa]', read_only=True),
+    Parameter('limits.p_max_pa', list(_DEFAULTS.p_max),
+              f"valve output limit per chamber {', '.join(CHAMBERS)} [Pa]", read_only=True),
+    Parameter('quadrant_bellows', [','.join(pair) for pair in _DEFAULTS.quadrant_bellows],
+              "bellows driving x,y in quadrants 1-4 (Fig 4: 'B4,B3', 'B2,B3', 'B2,B1', 'B4,B1')",
+              read_only=True),
+    Parameter('trial_duration_s', 20.0, 'length of a trial [s]', range=(1.0, 600.0)),
+    Parameter('measurement_timeout_s', 0.5,
+              'a ball position older than this is a vision dropout: hold, do not learn [s]',
+              range=(0.05, 10.0)),
+    Parameter('reach_tolerance_m', 0.005, 'per-axis tolerance for the reach time [m]',
+              range=(1e-4, 0.1)),
+    Parameter('path_tolerance_m', 0.01, 'distance at which a path waypoint counts as reached [m]',
+              range=(1e-3, 0.2)),
+    Parameter('ilc_memory_path', '', 'file keeping the ILC memories across runs (.npz); empty: '
+              'in memory only', read_only=True),
+    Parameter('knowledge_db_path', '', 'experiential knowledge database seeding new pid_ilc '
+              'tasks; empty: none', read_only=True),
+    Parameter('frame_id', 'sra_mount', 'frame of targets and measurements', read_only=True),
+)
+
+
+def task_key(target: np.ndarray) -> tuple[int, int, int]:
+    """ILC memories are kept per target, to the millimetre."""
+    return tuple(int(v) for v in np.round(np.asarray(target) * 1000.0))
+
+
+class PressureController(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('pressure_controller', **kwargs)
+        self.params = declare_parameters(self, PARAMETERS)
+        p = self.params
+        self.core_params = PidIlcParams(
+            kp=tuple(p['gains.kp']), ki=tuple(p['gains.ki']), kd=tuple(p['gains.kd']),
+            p_set=tuple(p['limits.p_set_pa']), p_max=tuple(p['limits.p_max_pa']),
+            rate_hz=p['rate_hz'],
+            quadrant_bellows=tuple(tuple(q.split(',')) for q in p['quadrant_bellows']))
+        self.controller = PidIlcController(n=1, params=self.core_params)
+        self.dt = 1.0 / p['rate_hz']
+        self.memories = self.load_memories(p['ilc_memory_path'])
+        self.knowledge = (KnowledgeDatabase.open(p['knowledge_db_path'])
+                          if p['knowledge_db_path'] else None)
+
+        self.position: np.ndarray | None = None
+        self.position_time = -math.inf
+        self.task: ControlTask | None = None
+        self.trial_active = False
+        self.trial_steps = 0
+        self.metrics: TrialMetrics | None = None
+        self.waypoints: list[np.ndarray] = []
+        self.command: np.ndarray | None = None  # last published set pressures, held when idle
+
+        self.create_subscription(
+            PointStamped, 'ball_position', self.on_ball_position, SENSOR_QOS,
+            event_callbacks=subscription_events(self, 'ball_position'))
+        self.create_subscription(
+            String, 'control_task', self.on_control_task, RELIABLE_QOS,
+            event_callbacks=subscription_events(self, 'control_task'))
+        self.create_subscription(
+            Path, 'planned_path', self.on_planned_path, LATCHED_QOS,
+            event_callbacks=subscription_events(self, 'planned_path'))
+        self.command_pub = self.create_publisher(
+            String, 'chamber_pressure_command', COMMAND_QOS,
+            event_callbacks=publisher_events(self, 'chamber_pressure_command'))
+        self.report_pub = self.create_publisher(
+            String, 'trial_report', RELIABLE_QOS,
+            event_callbacks=publisher_events(self, 'trial_report'))
+        self.create_service(Trigger, '~/start_trial', self.on_start_trial)
+        self.create_service(Trigger, '~/stop', self.on_stop)
+        self.create_service(Trigger, '~/reset_learning', self.on_reset_learning)
+        self.create_timer(self.dt, self.step)
+        self.add_post_set_parameters_callback(self.on_parameters_set)
+        self.get_logger().info(
+            f"ready: {p['rate_hz']} Hz, {len(self.memories)} ILC memories, knowledge database "
+            f"{'loaded' if self.knowledge is not None else 'none'}")
+
+    def on_parameters_set(self, parameters) -> None:
+        self.params.update({parameter.name: parameter.value for parameter in parameters})
+
+    # -- inputs --------------------------------------------------------------------------------
+
+    def on_ball_position(self, msg: PointStamped) -> None:
+        point = np.array([msg.point.x, msg.point.y, msg.point.z])
+        if not np.isfinite(point).all() or msg.header.frame_id != self.params['frame_id']:
+            self.get_logger().warning(
+                f"ball_position ignored: expected a finite point in '{self.params['frame_id']}',"
+                f" got {point.tolist()} in '{msg.header.frame_id}'", throttle_duration_sec=2.0)
+            return
+        self.position = point
+        self.position_time = time.monotonic()
+
+    def on_control_task(self, msg: String) -> None:
+        try:
+            task = from_string_msg(msg, expected=ControlTask)
+            if task.frame_id != self.params['frame_id']:
+                raise ValueError(
+                    f"frame_id '{task.frame_id}' is not '{self.params['frame_id']}'")
+        except (MessageError, ValueError) as err:
+            self.get_logger().error(f'control_task rejected: {err}')
+            return
+        self.waypoints = []
+        self.start_task(task)
+
+    def on_planned_path(self, msg: Path) -> None:
+        waypoints = [np.array([ps.pose.position.x, ps.pose.position.y, ps.pose.position.z])
+                     for ps in msg.poses]
+        try:
+            if not waypoints:
+                raise ValueError('the path has no poses')
+            if msg.header.frame_id != self.params['frame_id']:
+                raise ValueError(
+                    f"frame_id '{msg.header.frame_id}' is not '{self.params['frame_id']}'")
+            for i, waypoint in enumerate(waypoints):
+                check_in_workspace(waypoint, self.core_params.workspace, f'waypoint {i}')
+        except ValueError as err:
+            self.get_logger().error(f'planned_path rejected: {err}')
+            return
+        self.get_logger().info(f'following a path of {len(waypoints)} waypoints')
+        self.waypoints = waypoints[1:]
+        self.start_task(ControlTask(frame_id=self.params['frame_id'],
+                                    target=tuple(waypoints[0]), mode='pid', trial_id=0))
+
+    # -- trials --------------------------------------------------------------------------------
+
+    def start_task(self, task: ControlTask, restart_metrics: bool = True) -> bool:
+        """Start a trial of ``task`` from the current position; False (logged) if it can't."""
+        if self.position is None:
+            self.get_logger().error(
+                f'task to {list(task.target)} rejected: no ball_position received yet')
+            return False
+        target = np.array(task.target)
+        memory, source = None, 'PID alone'
+        if task.mode == 'pid_ilc' and task_key(target) in self.memories:
+            memory, source = self.memories[task_key(target)], 'ILC memory'
+        elif task.mode == 'pid_ilc' and self.knowledge is not None:
+            try:
+                memory, source = seed_memory(self.knowledge, target), 'knowledge database'
+            except (KeyError, ValueError) as err:
+                self.get_logger().warning(f'no knowledge for this task: {err}')
+        held = np.zeros(len(CHAMBERS)) if self.command is None else self.command
+        try:
+            self.controller.start_trial(self.position, target, memory, initial_output=held)
+        except ValueError as err:
+            self.get_logger().error(f'task to {list(task.target)} rejected: {err}')
+            return False
+        self.task = task
+        self.trial_active = True
+        self.trial_steps = 0
+        if restart_metrics:
+            self.metrics = TrialMetrics(target, self.params['reach_tolerance_m'])
+        self.get_logger().info(
+            f'trial {task.trial_id} ({task.mode}, {source}) to {np.round(target, 4).tolist()}')
+        return True
+
+    def step(self) -> None:
+        if not self.trial_active:
+            if self.command is not None:
+                self.publish_command(self.command)  # hold: the MCU vents a silent controller
+            return
+        fresh = time.monotonic() - self.position_time <= self.params['measurement_timeout_s']
+        if not fresh:
+            self.get_logger().warning(
+                'no fresh ball_position: holding the pressures, not learning',
+                throttle_duration_sec=2.0)
+        position = self.position if fresh else np.full(3, np.nan)
+        command = self.controller.step(position[None, :], self.dt, valid=[fresh])[0]
+        self.publish_command(command)
+        self.trial_steps += 1
+        elapsed = self.trial_steps * self.dt
+        if fresh:
+            self.metrics.add(self.position, elapsed)
+        if self.waypoints and fresh and np.linalg.norm(
+                self.position - self.controller.target[0]) <= self.params['path_tolerance_m']:
+            next_target = self.waypoints.pop(0)
+            self.controller.finish_trial()
+            self.start_task(ControlTask(frame_id=self.params['frame_id'],
+                                        target=tuple(next_target), mode='pid', trial_id=0))
+        elif not self.waypoints and elapsed >= self.params['trial_duration_s']:
+            self.finish_trial()
+
+    def finish_trial(self) -> None:
+        memory = self.controller.finish_trial()[0]
+        self.trial_active = False
+        self.memories[task_key(self.controller.target[0])] = memory
+        self.save_memories()
+        rmse = self.metrics.rmse[0]
+        reach = [None if math.isinf(t) else float(t) for t in self.metrics.reach_time[0]]
+        report = TrialReport(trial_index=self.task.trial_id, rmse=tuple(np.nan_to_num(rmse)),
+                             reach_time=tuple(reach))
+        self.report_pub.publish(to_string_msg(report))
+        self.get_logger().info(
+            f'trial {self.task.trial_id} done: RMSE {np.round(rmse * 1000, 1).tolist()} mm, '
+            f'reach time {reach} s; holding')
+
+    def publish_command(self, command: np.ndarray) -> None:
+        self.command = command
+        chambers = dict(zip(CHAMBERS, command.tolist(), strict=True))
+        self.command_pub.publish(to_string_msg(PressureCommand(chambers=chambers)))
+
+    # -- services ------------------------------------------------------------------------------
+
+    def on_start_trial(self, request, response):
+        if self.task is None:
+            response.success, response.message = False, 'no task yet: publish a control_task'
+            return response
+        task = ControlTask(frame_id=self.task.frame_id, target=self.task.target,
+                           mode=self.task.mode, trial_id=self.task.trial_id + 1)
+        self.waypoints = []
+        response.success = self.start_task(task)
+        response.message = f'trial {task.trial_id} started' if response.success else 'rejected'
+        return response
+
+    def on_stop(self, request, response):
+        if self.trial_active:
+            self.controller.finish_trial()  # discarded: a stopped trial teaches nothing
+            self.trial_active = False
+        self.waypoints = []
+        response.success, response.message = True, 'stopped; holding the last pressures'
+        self.get_logger().info(response.message)
+        return response
+
+    def on_reset_learning(self, request, response):
+        count = len(self.memories)
+        self.memories.clear()
+        self.save_memories()
+        response.success, response.message = True, f'forgot {count} ILC memories'
+        self.get_logger().info(response.message)
+        return response
+
+    # -- ILC memory file -----------------------------------------------------------------------
+
+    def load_memories(self, path: str) -> dict[tuple[int, int, int], np.ndarray]:
+        if not path or not os.path.exists(path):
+            return {}
+        try:
+            with np.load(path) as data:
+                keys, memories = data['targets_mm'], data['memories']
+            shape = (len(keys), self.core_params.memory_steps, len(CHAMBERS))
+            if keys.shape != (len(keys), 3) or memories.shape != shape:
+                raise ValueError(f'arrays of shape {keys.shape} and {memories.shape}')
+        except (OSError, KeyError, ValueError) as err:
+            raise ValueError(f"ilc_memory_path '{path}' is not an ILC memory file: {err}") from err
+        return {tuple(int(v) for v in key): memory for key, memory in zip(keys, memories,
+                                                                           strict=True)}
+
+    def save_memories(self) -> None:
+        path = self.params['ilc_memory_path']
+        if not path:
+            return
+        shape = (0, self.core_params.memory_steps, len(CHAMBERS))
+        keys = np.array(list(self.memories), dtype=np.int64).reshape(-1, 3)
+        memories = np.array(list(self.memories.values())).reshape(-1, *shape[1:])
+        tmp = path + '.tmp.npz'
+        np.savez(tmp, targets_mm=keys, memories=memories)
+        os.replace(tmp, path)  # atomic: a crash never leaves half a file
+
+
+def main(args: list[str] | None = None) -> None:
+    spin_node(PressureController, args)
+
+
+if __name__ == '__main__':
+    main()

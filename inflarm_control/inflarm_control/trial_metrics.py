@@ -1,0 +1,70 @@
+"""Per-axis RMSE and reach time of a control trial, accumulated sample by sample (Figs 7-8).
+
+Pure numpy, no rclpy: the pressure controller node feeds it live samples, `run_trials` feeds it
+simulated ones, and both report the same numbers.
+"""
+
+import numpy as np
+import numpy.typing as npt
+
+
+class TrialMetrics:
+    """Accumulates the end-point error of ``n`` tasks over one trial, per axis x, y, z.
+
+    Parameters
+    ----------
+    target : array-like, shape (3,) or (n, 3)
+        Target end point [m].
+    tolerance : float
+        Reach tolerance per axis [m], > 0.
+
+    Notes
+    -----
+    RMSE is the root mean square of ``zeta_e - zeta_d`` over every sample (Fig 8). The reach time
+    of an axis is the time of the first sample after which the coordinate stays within
+    ``tolerance`` of the target up to the latest sample; ``inf`` while the latest is outside.
+    """
+
+    def __init__(self, target: npt.ArrayLike, tolerance: float) -> None:
+        target = np.asarray(target, dtype=float)
+        if target.ndim not in (1, 2) or target.shape[-1] != 3:
+            raise ValueError(f'expected target of shape (3,) or (n, 3), got {target.shape}')
+        if not np.isfinite(target).all():
+            raise ValueError('expected a finite target [m]')
+        if not (np.isfinite(tolerance) and tolerance > 0.0):
+            raise ValueError(f'expected tolerance > 0 m, got {tolerance}')
+        self.target = np.atleast_2d(target)
+        self.tolerance = float(tolerance)
+        self.samples = 0
+        self._squared = np.zeros(self.target.shape)
+        self._outside = np.zeros(self.target.shape, dtype=bool)
+        self._inside_since = np.full(self.target.shape, np.inf)
+
+    def add(self, end_point: npt.ArrayLike, time: float) -> None:
+        """Add one sample of the measured end point, shape like ``target``, taken at ``time`` [s]
+        from the start of the trial."""
+        point = np.atleast_2d(np.asarray(end_point, dtype=float))
+        if point.shape != self.target.shape or not np.isfinite(point).all():
+            raise ValueError(
+                f'expected a finite end_point of shape {self.target.shape}, got '
+                f'{np.shape(end_point)} {np.asarray(end_point).tolist()}')
+        error = point - self.target
+        self._squared += error * error
+        self.samples += 1
+        outside = np.abs(error) > self.tolerance
+        entered = ~outside & (self._outside | np.isinf(self._inside_since))
+        self._inside_since = np.where(outside, np.inf,
+                                      np.where(entered, time, self._inside_since))
+        self._outside = outside
+
+    @property
+    def rmse(self) -> npt.NDArray[np.float64]:
+        """RMSE per axis so far, shape (n, 3) [m]; NaN before the first sample."""
+        with np.errstate(invalid='ignore', divide='ignore'):
+            return np.sqrt(self._squared / self.samples)
+
+    @property
+    def reach_time(self) -> npt.NDArray[np.float64]:
+        """Reach time per axis so far, shape (n, 3) [s]; ``inf`` if not (or no longer) within
+        tolerance at the latest sample."""
+        return self._inside_since.copy()

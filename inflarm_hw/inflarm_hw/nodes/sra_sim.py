@@ -1,0 +1,150 @@
+"""Simulated pneumatic soft robot arm (SRA) behind its valves and MCU: the default plant.
+
+Subscribes:
+    chamber_pressure_command (std_msgs/String: PressureCommand JSON, COMMAND_QOS): valve set
+        pressures [Pa] by chamber name (PEA, B1..B4); chambers not named keep their command.
+Publishes:
+    chamber_pressures (std_msgs/String: ChamberPressures JSON, RELIABLE_QOS): measured [Pa].
+    end_point_truth (geometry_msgs/PointStamped, SENSOR_QOS): true end point [m], for evaluation.
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the end point as the camera measures
+        it (with noise), when ``publish_ball_position`` is true.
+Parameters:
+    physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates.
+    publish_ball_position (bool): publish the simulated measurement on ``ball_position``.
+    measurement_noise_m (double): camera noise per axis [m].
+    cmd_timeout_s (double): without a command for this long the MCU vents every chamber.
+    frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
+    seed (int, read-only): noise seed, -1 for a random one.
+"""
+
+import dataclasses
+import time
+
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+from inflarm_model.soft_arm import CHAMBERS
+from inflarm_msgs_json import ChamberPressures, MessageError, PressureCommand
+from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.qos import (
+    COMMAND_QOS,
+    RELIABLE_QOS,
+    SENSOR_QOS,
+    publisher_events,
+    subscription_events,
+)
+from inflarm_msgs_json.ros.spin import spin_node
+
+PARAMETERS = (
+    Parameter('physics_rate_hz', 50.0, 'simulation step rate [Hz]', range=(1.0, 1000.0),
+              read_only=True),
+    Parameter('state_rate_hz', 10.0, 'chamber pressure and true end point rate [Hz]',
+              range=(0.1, 1000.0), read_only=True),
+    Parameter('camera_rate_hz', 5.0, 'simulated camera rate [Hz] (paper: about 5 Hz)',
+              range=(0.1, 100.0), read_only=True),
+    Parameter('publish_ball_position', True,
+              'publish the simulated camera measurement on ball_position', read_only=True),
+    Parameter('measurement_noise_m', 0.0005, 'camera noise per axis [m]', range=(0.0, 0.05)),
+    Parameter('cmd_timeout_s', 2.0, 'vent every chamber after this long without a command [s]',
+              range=(0.1, 600.0)),
+    Parameter('frame_id', 'sra_mount', 'frame of the published points', read_only=True),
+    Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
+              read_only=True),
+)
+
+
+class SraSim(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('sra_sim', **kwargs)
+        self.params = declare_parameters(self, PARAMETERS)
+        seed = self.params['seed']
+        self.plant = SoftArmPlant(
+            n=1, params=SoftArmPlantParams(noise_std=self.params['measurement_noise_m']),
+            rng=np.random.default_rng(None if seed < 0 else seed))
+        self.command = np.zeros(len(CHAMBERS))
+        self.last_command_time = time.monotonic()
+        self.vented = True
+
+        self.create_subscription(
+            String, 'chamber_pressure_command', self.on_command, COMMAND_QOS,
+            event_callbacks=subscription_events(self, 'chamber_pressure_command'))
+        self.pressures_pub = self.create_publisher(
+            String, 'chamber_pressures', RELIABLE_QOS,
+            event_callbacks=publisher_events(self, 'chamber_pressures'))
+        self.truth_pub = self.create_publisher(PointStamped, 'end_point_truth', SENSOR_QOS)
+        self.ball_pub = None
+        if self.params['publish_ball_position']:
+            self.ball_pub = self.create_publisher(PointStamped, 'ball_position', SENSOR_QOS)
+            self.create_timer(1.0 / self.params['camera_rate_hz'], self.publish_measurement)
+        self.dt = 1.0 / self.params['physics_rate_hz']
+        self.create_timer(self.dt, self.step)
+        self.create_timer(1.0 / self.params['state_rate_hz'], self.publish_state)
+        self.add_post_set_parameters_callback(self.on_parameters_set)
+        self.get_logger().info(
+            f"ready: SRA at rest, {self.params['physics_rate_hz']} Hz physics, chambers "
+            f"{', '.join(CHAMBERS)}")
+
+    def on_parameters_set(self, parameters) -> None:
+        for parameter in parameters:
+            self.params[parameter.name] = parameter.value
+            if parameter.name == 'measurement_noise_m':
+                self.plant.params = dataclasses.replace(self.plant.params,
+                                                        noise_std=parameter.value)
+
+    def on_command(self, msg: String) -> None:
+        try:
+            command = from_string_msg(msg, expected=PressureCommand).as_dict()
+            unknown = sorted(set(command) - set(CHAMBERS))
+            if unknown:
+                raise MessageError(
+                    f'PressureCommand.chambers: unknown chambers {unknown}, '
+                    f'expected some of {list(CHAMBERS)}')
+        except MessageError as err:
+            self.get_logger().warning(
+                f'chamber_pressure_command rejected: {err}', throttle_duration_sec=2.0)
+            return
+        for name, pressure in command.items():
+            self.command[CHAMBERS.index(name)] = pressure
+        self.last_command_time = time.monotonic()
+        if self.vented:
+            self.vented = False
+            self.get_logger().info('commands received: valves follow them')
+
+    def step(self) -> None:
+        # Fail safe like the MCU: a silent controller gets every chamber vented.
+        if (not self.vented
+                and time.monotonic() - self.last_command_time > self.params['cmd_timeout_s']):
+            self.command[:] = 0.0
+            self.vented = True
+            self.get_logger().warning(
+                f"no chamber_pressure_command for {self.params['cmd_timeout_s']} s: "
+                'venting every chamber')
+        self.plant.step(self.command, self.dt)
+
+    def point_msg(self, point: np.ndarray) -> PointStamped:
+        msg = PointStamped()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.params['frame_id']
+        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in point)
+        return msg
+
+    def publish_state(self) -> None:
+        pressures = dict(zip(CHAMBERS, self.plant.chamber_pressures[0].tolist(), strict=True))
+        self.pressures_pub.publish(to_string_msg(ChamberPressures(chambers=pressures)))
+        self.truth_pub.publish(self.point_msg(self.plant.end_point[0]))
+
+    def publish_measurement(self) -> None:
+        self.ball_pub.publish(self.point_msg(self.plant.measure()[0]))
+
+
+def main(args: list[str] | None = None) -> None:
+    spin_node(SraSim, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,64 @@
+"""Publishes the URDF of the inflatable-link arm for RViz and other description users.
+
+Publishes:
+    robot_description (std_msgs/String, LATCHED_QOS): URDF of the 7-DOF pseudo-rigid arm
+        (Table 2), spring joints as revolute joints with their stiffness recorded in
+        ``<inflarm:spring>`` elements; republished when the stiffness changes.
+Parameters:
+    arm.* (see inflarm_model.nodes.arm_parameters): link length, spring offset, link radius,
+        spring stiffness, link pressure.
+"""
+
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from inflarm_model.nodes.arm_parameters import ARM_PARAMETERS, check_arm_parameters
+from inflarm_model.urdf import flexible_arm_urdf
+from inflarm_msgs_json.ros.parameters import declare_parameters
+from inflarm_msgs_json.ros.qos import LATCHED_QOS, publisher_events
+from inflarm_msgs_json.ros.spin import spin_node
+
+
+class RobotDescription(Node):
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('robot_description', **kwargs)
+        self.params = declare_parameters(self, ARM_PARAMETERS)
+        problem = check_arm_parameters(self.params)
+        if problem is not None:
+            raise ValueError(problem)
+        self.description_pub = self.create_publisher(
+            String, 'robot_description', LATCHED_QOS,
+            event_callbacks=publisher_events(self, 'robot_description'))
+        self.add_on_set_parameters_callback(self.on_set_parameters)
+        self.add_post_set_parameters_callback(self.on_parameters_set)
+        self.publish()
+        self.get_logger().info('ready: robot_description published')
+
+    def on_set_parameters(self, parameters) -> SetParametersResult:
+        problem = check_arm_parameters({p.name: p.value for p in parameters})
+        return SetParametersResult(successful=problem is None, reason=problem or '')
+
+    def on_parameters_set(self, parameters) -> None:
+        self.params.update({p.name: p.value for p in parameters})
+        if any(p.name == 'arm.spring_stiffness' for p in parameters):
+            self.publish()
+            self.get_logger().info('stiffness changed: robot_description republished')
+
+    def publish(self) -> None:
+        urdf = flexible_arm_urdf(
+            link_length=self.params['arm.link_length_m'],
+            spring_offset=self.params['arm.spring_offset_m'],
+            radius=self.params['arm.link_radius_m'],
+            stiffness=self.params['arm.spring_stiffness'],
+        )
+        self.description_pub.publish(String(data=urdf))
+
+
+def main(args: list[str] | None = None) -> None:
+    spin_node(RobotDescription, args)
+
+
+if __name__ == '__main__':
+    main()
