@@ -22,6 +22,7 @@ setup(
     entry_points={
         'console_scripts': [
             'pressure_controller = inflarm_control.nodes.pressure_controller:main',
+            'trial_runner = inflarm_control.nodes.trial_runner:main',
         ],
     },
 )

@@ -8,6 +8,7 @@ Exit code 0 only when every node exited cleanly.
 """
 
 import argparse
+import dataclasses
 from dataclasses import dataclass, field
 import os
 import pathlib
@@ -30,14 +31,17 @@ class NodeProcess:
     package: str
     executable: str
     parameters: dict[str, object] = field(default_factory=dict)
+    # Shared parameter files as (package, file name in its share/config), applied first.
+    shared_params: tuple[tuple[str, str], ...] = ()
     remappings: dict[str, str] = field(default_factory=dict)
     log_level: str | None = None
 
     def command(self) -> list[str]:
         prefix = get_package_prefix(self.package)
         command = [os.path.join(prefix, 'lib', self.package, self.executable), '--ros-args']
-        config = os.path.join(
-            get_package_share_directory(self.package), 'config', f'{self.executable}.yaml')
+        for package, name in self.shared_params:
+            command += ['--params-file', _config_path(package, name)]
+        config = _config_path(self.package, f'{self.executable}.yaml')
         if os.path.isfile(config):
             command += ['--params-file', config]
         for name, value in self.parameters.items():
@@ -47,6 +51,10 @@ class NodeProcess:
         if self.log_level:
             command += ['--log-level', self.log_level]
         return command
+
+
+def _config_path(package: str, name: str) -> str:
+    return os.path.join(get_package_share_directory(package), 'config', name)
 
 
 def _yaml_value(value: object) -> str:
@@ -59,6 +67,12 @@ def _yaml_value(value: object) -> str:
 
 # The systems a user can launch. The first is the default.
 SYSTEMS: dict[str, tuple[NodeProcess, ...]] = {
+    'sra': (
+        NodeProcess('inflarm_hw', 'sra_sim'),
+        NodeProcess('inflarm_control', 'pressure_controller',
+                    parameters={'trial_duration_s': 10.0}),
+        NodeProcess('inflarm_control', 'trial_runner'),
+    ),
     'smoke': (
         NodeProcess('inflarm_hw', 'demo_joint_publisher'),
         NodeProcess('inflarm_hw', 'joint_state_monitor'),
@@ -164,8 +178,7 @@ def main() -> None:
     parser.add_argument('--log-level', default=None, help='log level for every node')
     args = parser.parse_args()
     nodes = tuple(
-        NodeProcess(n.package, n.executable, n.parameters, n.remappings, args.log_level)
-        for n in SYSTEMS[args.system])
+        dataclasses.replace(node, log_level=args.log_level) for node in SYSTEMS[args.system])
     sys.exit(launch(nodes, args.duration))
 
 

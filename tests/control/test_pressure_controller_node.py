@@ -9,7 +9,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from inflarm_control.nodes.pressure_controller import PressureController
-from inflarm_msgs_json import ControlTask, decode, PressureCommand, TrialReport
+from inflarm_msgs_json import ControlTask, PressureCommand, TrialReport, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
 from ros_harness import spin_until
@@ -145,3 +145,17 @@ def test_a_corrupt_memory_file_stops_the_node_at_startup(ros_context, tmp_path):
     with pytest.raises(ValueError, match='is not an ILC memory file'):
         PressureController(context=ros_context,
                            parameter_overrides=[Parameter('ilc_memory_path', value=str(bad))])
+
+
+def test_vent_ends_the_trial_and_holds_zero_pressure(executor):
+    rig = Rig(executor)
+    rig.ball(START)
+    assert spin_until(executor, lambda: rig.controller.position is not None)
+    rig.task(TARGET)
+    assert spin_until(executor, lambda: len(rig.commands) >= 3)
+    assert rig.call('vent').success
+    assert not rig.controller.trial_active
+    count = len(rig.commands)
+    rig.spin(0.7)
+    assert len(rig.commands) >= count + 2
+    assert all(set(c.as_dict().values()) == {0.0} for c in rig.commands[count:])

@@ -6,7 +6,7 @@ import pytest
 import rclpy
 from std_msgs.msg import String
 
-from inflarm_msgs_json import ControlTask, decode, TrialReport
+from inflarm_msgs_json import ControlTask, TrialReport, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS
 from ros_harness import spin_until

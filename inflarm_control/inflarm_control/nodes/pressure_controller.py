@@ -17,6 +17,8 @@ Publishes:
 Services (std_srvs/Trigger):
     ~/start_trial: repeat the last task as the next trial.
     ~/stop: end the current trial without learning; the last pressures are held.
+    ~/vent: end the current trial without learning and vent every chamber (0 Pa, held): the
+        arm returns to rest, where the paper's trials start (eq. 3: outputs start at 0 kPa).
     ~/reset_learning: forget every ILC memory (and the memory file).
 Parameters:
     rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, quadrant_bellows (read-only),
@@ -131,6 +133,7 @@ class PressureController(Node):
             event_callbacks=publisher_events(self, 'trial_report'))
         self.create_service(Trigger, '~/start_trial', self.on_start_trial)
         self.create_service(Trigger, '~/stop', self.on_stop)
+        self.create_service(Trigger, '~/vent', self.on_vent)
         self.create_service(Trigger, '~/reset_learning', self.on_reset_learning)
         self.create_timer(self.dt, self.step)
         self.add_post_set_parameters_callback(self.on_parameters_set)
@@ -274,12 +277,22 @@ class PressureController(Node):
         response.message = f'trial {task.trial_id} started' if response.success else 'rejected'
         return response
 
-    def on_stop(self, request, response):
+    def abort_trial(self) -> None:
         if self.trial_active:
-            self.controller.finish_trial()  # discarded: a stopped trial teaches nothing
+            self.controller.finish_trial()  # discarded: an aborted trial teaches nothing
             self.trial_active = False
         self.waypoints = []
+
+    def on_stop(self, request, response):
+        self.abort_trial()
         response.success, response.message = True, 'stopped; holding the last pressures'
+        self.get_logger().info(response.message)
+        return response
+
+    def on_vent(self, request, response):
+        self.abort_trial()
+        self.publish_command(np.zeros(len(CHAMBERS)))
+        response.success, response.message = True, 'venting every chamber'
         self.get_logger().info(response.message)
         return response
 
