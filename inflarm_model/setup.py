@@ -21,6 +21,8 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'inflarm-characterize = inflarm_model.characterize_cli:main',
+            'robot_description = inflarm_model.nodes.robot_description:main',
         ],
     },
 )

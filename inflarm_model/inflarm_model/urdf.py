@@ -1,0 +1,425 @@
+"""Robot description of the inflatable-link arm: DH tables and URDF text.
+
+The rigid arm is Table 1 of 000_ce37cf035a0a87c6 (3 revolute motors, two links of length L).
+The flexible arm is Table 2: each inflatable link becomes two rigid bodies of lengths l1 and
+l2 = L - l1 joined by two orthogonal virtual torsional springs (pseudo-rigid-body model,
+sections 2.1-2.2). Both are serial standard-DH chains,
+T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i), and are written here as URDF so that Pinocchio,
+robot_state_publisher and RViz all read the same description.
+
+URDF layout of a DH chain with joints 1..n:
+
+- ``base_link`` is DH frame 0; joint i rotates about the z axis of frame i-1, so its origin
+  in the parent link is the constant part Tz(d_{i-1}) Tx(a_{i-1}) Rx(alpha_{i-1}) of the
+  previous row (identity for joint 1);
+- the child link of joint i is named ``<joint>_link`` and carries a cylinder visual along the
+  segment to the next frame origin;
+- a fixed joint ``tip_joint`` places the ``tip`` link at DH frame n, the end effector.
+
+The spring stiffness of eq. (2)/(7) is recorded per spring joint as a custom element in the
+``INFLARM_XMLNS`` namespace, ``<inflarm:spring joint="spring_1" stiffness="172.71"/>``, a
+direct child of ``<robot>``. URDF parsers (urdfdom, hence Pinocchio and robot_state_publisher)
+skip elements they do not know; ``spring_stiffness_from_urdf`` reads it back.
+"""
+
+from collections.abc import Mapping, Sequence
+import math
+import re
+import xml.etree.ElementTree as ET
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+import numpy.typing as npt
+
+INFLARM_XMLNS = 'https://inflarm.org/xmlns/urdf'
+
+BASE_LINK = 'base_link'
+TIP_LINK = 'tip'
+TIP_JOINT = 'tip_joint'
+
+# Motors are DH joints 1, 2, 5 and virtual springs DH joints 3, 4, 6, 7 (Table 2, section 2.2).
+MOTOR_JOINT_NAMES = ('joint_1', 'joint_2', 'joint_3')
+SPRING_JOINT_NAMES = ('spring_1', 'spring_2', 'spring_3', 'spring_4')
+RIGID_JOINT_NAMES = MOTOR_JOINT_NAMES
+FLEXIBLE_JOINT_NAMES = (
+    'joint_1', 'joint_2', 'spring_1', 'spring_2', 'joint_3', 'spring_3', 'spring_4',
+)
+
+DEFAULT_LINK_LENGTH = 0.6  # L [m], prototype of section 3
+DEFAULT_SPRING_OFFSET = 0.03  # l1 [m], first wrinkle position, section 4
+DEFAULT_RADIUS = 0.055  # r [m], prototype of section 3
+DEFAULT_STIFFNESS = 172.71  # mean k [N m/rad] over Table 3, section 4
+
+# The paper gives no joint limits; URDF requires <limit> on revolute joints, so these are
+# placeholders wide enough never to bind (one full turn for motors and springs alike).
+_LIMIT = f'<limit lower="{-math.pi!r}" upper="{math.pi!r}" effort="1000.0" velocity="10.0"/>'
+_FABRIC_RGBA = '0.93 0.93 0.88 1.0'  # PVC-coated fabric, off-white
+_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_.-]*')
+
+
+def _positive(name: str, value: float, what: str) -> float:
+    """Return ``value`` as a positive finite float or raise naming ``name`` and ``what``."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        x = math.nan
+    if not (math.isfinite(x) and x > 0.0):
+        raise ValueError(f'expected {name} to be a positive finite {what}, got {value!r}')
+    return x
+
+
+def _length(name: str, value: float) -> float:
+    return _positive(name, value, 'length [m]')
+
+
+def rigid_dh_table(link_length: float = DEFAULT_LINK_LENGTH) -> npt.NDArray[np.float64]:
+    """Constant DH parameters of the rigid 3-DOF arm, Table 1 of 000_ce37cf035a0a87c6.
+
+    Parameters
+    ----------
+    link_length : float
+        Link length L [m], positive and finite.
+
+    Returns
+    -------
+    dh_table : ndarray, shape (3, 3)
+        One row per joint, columns ``(a_i [m], alpha_i [rad], d_i [m])``; theta_i is the joint
+        variable.
+
+    Raises
+    ------
+    ValueError
+        If ``link_length`` is not a positive finite number.
+    """
+    L = _length('link_length', link_length)
+    return np.array([
+        [0.0, math.pi / 2, 0.0],
+        [L, 0.0, 0.0],
+        [L, 0.0, 0.0],
+    ])
+
+
+def flexible_dh_table(
+    link_length: float = DEFAULT_LINK_LENGTH, spring_offset: float = DEFAULT_SPRING_OFFSET
+) -> npt.NDArray[np.float64]:
+    """Constant DH parameters of the 7-DOF flexible arm, Table 2 of 000_ce37cf035a0a87c6.
+
+    Parameters
+    ----------
+    link_length : float
+        Inflatable link length L [m], positive and finite.
+    spring_offset : float
+        Distance l1 [m] of the virtual springs from the proximal joint of each link,
+        ``0 < spring_offset < link_length``; the distal body has length l2 = L - l1.
+
+    Returns
+    -------
+    dh_table : ndarray, shape (7, 3)
+        One row per joint in DH order (motor, motor, spring, spring, motor, spring, spring),
+        columns ``(a_i [m], alpha_i [rad], d_i [m])``.
+
+    Raises
+    ------
+    ValueError
+        If a length is not positive and finite or ``spring_offset >= link_length``.
+    """
+    L = _length('link_length', link_length)
+    l1 = _length('spring_offset', spring_offset)
+    if l1 >= L:
+        raise ValueError(
+            f'expected spring_offset < link_length ({L!r} m), got {spring_offset!r}'
+        )
+    l2 = L - l1
+    h = math.pi / 2
+    return np.array([
+        [0.0, h, 0.0],
+        [l1, -h, 0.0],
+        [0.0, h, 0.0],
+        [l2, 0.0, 0.0],
+        [l1, -h, 0.0],
+        [0.0, h, 0.0],
+        [l2, 0.0, 0.0],
+    ])
+
+
+def check_dh_table(dh_table: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Validate a DH table and return it as a float array.
+
+    Parameters
+    ----------
+    dh_table : array-like, shape (n, 3)
+        Rows ``(a_i [m], alpha_i [rad], d_i [m])``, n >= 1, all finite.
+
+    Returns
+    -------
+    dh_table : ndarray, shape (n, 3)
+
+    Raises
+    ------
+    ValueError
+        If the shape is wrong or an entry is not finite.
+    """
+    try:
+        table = np.array(dh_table, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f'expected dh_table as an array-like of shape (n, 3), got {dh_table!r}'
+        ) from None
+    if table.ndim != 2 or table.shape[1] != 3 or table.shape[0] < 1:
+        raise ValueError(f'expected dh_table of shape (n, 3) with n >= 1, got {table.shape}')
+    if not np.isfinite(table).all():
+        raise ValueError('expected dh_table to be finite, got non-finite entries')
+    return table
+
+
+def _check_joint_names(joint_names: Sequence[str], n: int) -> tuple[str, ...]:
+    names = tuple(joint_names)
+    if len(names) != n:
+        raise ValueError(f'expected joint_names of length {n}, got {len(names)}')
+    for name in names:
+        if not isinstance(name, str) or not _NAME.fullmatch(name):
+            raise ValueError(
+                f'expected joint_names to be identifiers like spring_1, got {name!r}'
+            )
+    link_names = {BASE_LINK, TIP_LINK, TIP_JOINT}
+    link_names.update(f'{name}_link' for name in names)
+    if len(set(names)) != n or link_names & set(names):
+        raise ValueError(f'expected unique joint_names distinct from link names, got {names}')
+    return names
+
+
+def _fmt(x: float) -> str:
+    # repr round-trips a float exactly, so Pinocchio sees the same numbers as numpy.
+    return repr(float(x))
+
+
+def _origin(xyz: Sequence[float], rpy: Sequence[float]) -> str:
+    return (
+        f'<origin xyz="{" ".join(_fmt(v) for v in xyz)}" '
+        f'rpy="{" ".join(_fmt(v) for v in rpy)}"/>'
+    )
+
+
+def _segment_visual(a: float, d: float, radius: float) -> str:
+    """Cylinder along the DH segment from the link origin to (a, 0, d) in the link frame."""
+    length = math.hypot(a, d)
+    if length == 0.0:
+        return ''
+    # URDF cylinders lie along z; pitching by atan2(a, d) turns z onto (a, 0, d) / length.
+    return (
+        '    <visual>\n'
+        f'      {_origin((a / 2, 0.0, d / 2), (0.0, math.atan2(a, d), 0.0))}\n'
+        f'      <geometry><cylinder radius="{_fmt(radius)}" length="{_fmt(length)}"/>'
+        '</geometry>\n'
+        '      <material name="fabric"/>\n'
+        '    </visual>\n'
+    )
+
+
+def dh_chain_urdf(
+    robot_name: str,
+    dh_table: npt.ArrayLike,
+    joint_names: Sequence[str],
+    radius: float = DEFAULT_RADIUS,
+    spring_stiffness: Mapping[str, float] | None = None,
+) -> str:
+    """URDF text of a serial revolute chain given by a standard DH table.
+
+    Parameters
+    ----------
+    robot_name : str
+        Value of ``<robot name=...>``.
+    dh_table : array-like, shape (n, 3)
+        Rows ``(a_i [m], alpha_i [rad], d_i [m])`` with
+        T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i).
+    joint_names : sequence of str, length n
+        Names of the revolute joints in DH order.
+    radius : float
+        Radius [m] of the cylinder visuals drawn along the links.
+    spring_stiffness : mapping of str to float, optional
+        Stiffness k [N m/rad] of eq. (2) per spring joint name, recorded as
+        ``<inflarm:spring joint=... stiffness=.../>`` elements.
+
+    Returns
+    -------
+    str
+        URDF document: root ``base_link`` (DH frame 0), joints in DH order, fixed ``tip`` link
+        at DH frame n.
+
+    Raises
+    ------
+    ValueError
+        On a malformed table, names of the wrong length or duplicated, a non-positive radius,
+        or a stiffness that is not positive and finite or names an unknown joint.
+    """
+    table = check_dh_table(dh_table)
+    names = _check_joint_names(joint_names, table.shape[0])
+    radius = _length('radius', radius)
+    springs = {}
+    for joint, k in (spring_stiffness or {}).items():
+        if joint not in names:
+            raise ValueError(f'expected spring_stiffness keys among {names}, got {joint!r}')
+        springs[joint] = _positive(f'spring_stiffness[{joint!r}]', k, 'stiffness [N m/rad]')
+
+    parts = [
+        '<?xml version="1.0"?>\n',
+        f'<robot name={quoteattr(robot_name)} xmlns:inflarm="{INFLARM_XMLNS}">\n',
+        '  <!-- Generated by inflarm_model.urdf from a standard DH table; '
+        'joint limits are placeholders. -->\n',
+    ]
+    parts.append(f'  <material name="fabric"><color rgba="{_FABRIC_RGBA}"/></material>\n')
+    parts += [
+        f'  <inflarm:spring joint="{joint}" stiffness="{_fmt(k)}"/>\n'
+        for joint, k in springs.items()
+    ]
+    parts.append(f'  <link name="{BASE_LINK}"/>\n')
+    parent = BASE_LINK
+    previous = (0.0, 0.0, 0.0)  # joint 1 sits at the origin of frame 0
+    for name, (a, alpha, d) in zip(names, table, strict=True):
+        prev_a, prev_alpha, prev_d = previous
+        child = f'{name}_link'
+        parts.append(
+            f'  <joint name="{name}" type="revolute">\n'
+            f'    <parent link="{parent}"/>\n'
+            f'    <child link="{child}"/>\n'
+            f'    {_origin((prev_a, 0.0, prev_d), (prev_alpha, 0.0, 0.0))}\n'
+            '    <axis xyz="0 0 1"/>\n'
+            f'    {_LIMIT}\n'
+            '  </joint>\n'
+        )
+        visual = _segment_visual(a, d, radius)
+        parts.append(
+            f'  <link name="{child}">\n{visual}  </link>\n' if visual
+            else f'  <link name="{child}"/>\n'
+        )
+        parent, previous = child, (a, alpha, d)
+    prev_a, prev_alpha, prev_d = previous
+    parts.append(
+        f'  <joint name="{TIP_JOINT}" type="fixed">\n'
+        f'    <parent link="{parent}"/>\n'
+        f'    <child link="{TIP_LINK}"/>\n'
+        f'    {_origin((prev_a, 0.0, prev_d), (prev_alpha, 0.0, 0.0))}\n'
+        '  </joint>\n'
+        f'  <link name="{TIP_LINK}"/>\n'
+        '</robot>\n'
+    )
+    return ''.join(parts)
+
+
+def rigid_arm_urdf(
+    link_length: float = DEFAULT_LINK_LENGTH, radius: float = DEFAULT_RADIUS
+) -> str:
+    """URDF text of the rigid 3-DOF arm of Table 1 (joints ``joint_1`` .. ``joint_3``).
+
+    Parameters
+    ----------
+    link_length : float
+        Link length L [m].
+    radius : float
+        Link radius [m] for the cylinder visuals.
+
+    Returns
+    -------
+    str
+        URDF document, see ``dh_chain_urdf``.
+
+    Raises
+    ------
+    ValueError
+        If a length is not positive and finite.
+    """
+    return dh_chain_urdf('inflarm_rigid', rigid_dh_table(link_length), RIGID_JOINT_NAMES, radius)
+
+
+def flexible_arm_urdf(
+    link_length: float = DEFAULT_LINK_LENGTH,
+    spring_offset: float = DEFAULT_SPRING_OFFSET,
+    radius: float = DEFAULT_RADIUS,
+    stiffness: float | npt.ArrayLike = DEFAULT_STIFFNESS,
+) -> str:
+    """URDF text of the 7-DOF flexible arm of Table 2 with its spring stiffness.
+
+    Motors are ``joint_1``, ``joint_2``, ``joint_3`` (DH joints 1, 2, 5), virtual springs
+    ``spring_1`` .. ``spring_4`` (DH joints 3, 4, 6, 7); all are revolute joints.
+
+    Parameters
+    ----------
+    link_length : float
+        Inflatable link length L [m].
+    spring_offset : float
+        l1 [m], ``0 < spring_offset < link_length``.
+    radius : float
+        Link radius [m] for the cylinder visuals.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness k [N m/rad] of eq. (7), one value for all springs (the paper's
+        orthotropic assumption, section 2.3) or one per spring in ``SPRING_JOINT_NAMES`` order.
+
+    Returns
+    -------
+    str
+        URDF document, see ``dh_chain_urdf``.
+
+    Raises
+    ------
+    ValueError
+        If a length is invalid or the stiffness is not positive, finite, scalar or (4,).
+    """
+    table = flexible_dh_table(link_length, spring_offset)
+    try:
+        k = np.array(stiffness, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f'expected stiffness as a float or shape (4,) [N m/rad], got {stiffness!r}'
+        ) from None
+    if k.shape not in ((), (4,)):
+        raise ValueError(f'expected stiffness of shape () or (4,), got {k.shape}')
+    if not (np.isfinite(k).all() and (k > 0.0).all()):
+        raise ValueError(
+            f'expected stiffness to be positive and finite [N m/rad], got {stiffness!r}'
+        )
+    k = np.broadcast_to(k, (4,))
+    return dh_chain_urdf(
+        'inflarm_flexible', table, FLEXIBLE_JOINT_NAMES, radius,
+        dict(zip(SPRING_JOINT_NAMES, k.tolist(), strict=True)),
+    )
+
+
+def spring_stiffness_from_urdf(text: str) -> dict[str, float]:
+    """Read the ``<inflarm:spring>`` stiffness elements of a URDF document.
+
+    Parameters
+    ----------
+    text : str
+        URDF text, e.g. from ``flexible_arm_urdf`` or the ``robot_description`` parameter.
+
+    Returns
+    -------
+    dict of str to float
+        Stiffness k [N m/rad] per spring joint name, in document order; empty for a URDF
+        without springs (the rigid arm).
+
+    Raises
+    ------
+    ValueError
+        If the text is not XML, an element lacks its attributes, names a joint that is not in
+        the URDF or twice, or has a stiffness that is not positive and finite.
+    """
+    try:
+        root = ET.fromstring(text)
+    except (ET.ParseError, TypeError) as err:
+        raise ValueError(f'expected text to be a URDF XML document: {err}') from None
+    joints = {j.get('name') for j in root.iter('joint')}
+    springs: dict[str, float] = {}
+    for element in root.iter(f'{{{INFLARM_XMLNS}}}spring'):
+        joint, value = element.get('joint'), element.get('stiffness')
+        if joint is None or value is None:
+            raise ValueError(
+                'expected <inflarm:spring joint="..." stiffness="..."/>, '
+                f'got attributes {element.attrib}'
+            )
+        if joint not in joints or joint in springs:
+            raise ValueError(
+                f'expected each spring joint once and declared as a <joint>, got {joint!r}'
+            )
+        springs[joint] = _positive(f'stiffness of {joint!r}', value, 'stiffness [N m/rad]')
+    return springs
