@@ -24,6 +24,7 @@ setup(
             'demo_joint_publisher = inflarm_hw.nodes.demo_joint_publisher:main',
             'joint_state_monitor = inflarm_hw.nodes.joint_state_monitor:main',
             'sra_sim = inflarm_hw.nodes.sra_sim:main',
+            'arm_sim = inflarm_hw.nodes.arm_sim:main',
         ],
     },
 )

@@ -1,0 +1,429 @@
+"""Simulated pneumatic soft robot arm (SRA): valves, chambers and end point, batched over arms.
+
+The simulation backend for the SRA of ``001_b59ad71c956a1751`` (sections 2-3). It stands in for
+the five ITV2050 proportional valves, the chambers of PEA1&2 (one pressure through the T-pipe) and
+bellows B1-B4, and the arm's mechanics, so that the model-free PID + ILC controller of section 3
+has the same kind of work to do as on the prototype: a slow, large PEA chamber, fast bellows, the
+valves' 0-4 kPa dead zone, backlash-like hysteresis and the coupling of bending into z.
+
+Everything is vectorized over a leading axis of ``n`` independent arms (``n = 1`` for the ROS
+node, thousands for building the experiential knowledge database); there is no Python loop over
+arms. Pure numpy, no rclpy.
+
+Signal chain per arm and chamber (``CHAMBERS`` order: PEA, B1, B2, B3, B4)::
+
+    command [Pa] -> valve voltage (eq. 2) -> valve output [Pa] (dead zone, range)
+      -> chamber pressure (first order, time constant growing with chamber volume)
+      -> static extension / bend (saturating, bellows stiff below a threshold pressure)
+      -> play operator (hysteresis) -> mechanics (extension: 2nd order; bend: 1st order)
+      -> end point by the point-joint kinematics of eq. (6) (`inflarm_model.soft_arm`)
+
+Bend directions follow Fig 4 (see `inflarm_model.soft_arm.BELLOWS_PUSH`): B4 bends the end
+towards +x, B2 towards -x, B3 towards +y, B1 towards -y, so Q1 = B3 + B4, Q2 = B2 + B3,
+Q3 = B1 + B2, Q4 = B1 + B4. Bending lowers z (``z = l1 (1 + cos(theta))``), which is the x/z
+coupling the paper's z controller has to fight. With all chambers at 0 Pa the arm rests straight
+at ``(0, 0, 0.604)`` m, the initial point of the Fig 7 experiment, so a trial starts from the
+paper's initial output of 0 kPa (eq. 3).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from inflarm_model.soft_arm import CHAMBERS, inverse_kinematics
+
+_N_CHAMBERS = len(CHAMBERS)
+
+
+@dataclass(frozen=True)
+class SoftArmPlantParams:
+    """Constants of the simulated SRA. Values are chosen, not identified (the paper gives no
+    plant model); the reasons are given per constant.
+
+    Attributes
+    ----------
+    pea_rest_length : float
+        Length of PEA1 (= PEA2) at 0 Pa [m]. 0.302 m puts the straight arm at z = 0.604 m, the
+        initial point of Fig 7, and makes the fully bent rest arm reach z ~ 0.57 m, the lower
+        bound of the positive-pressure work space (Fig 5A).
+    extension_max : float
+        Asymptotic extension of each PEA at infinite pressure [m]. 0.223 m makes the straight arm
+        reach z = 0.990 m (top of Fig 5A) at 100 kPa.
+    extension_pressure_scale : float
+        Pressure scale of the saturating extension law
+        ``ext = extension_max (1 - exp(-p / scale))`` [Pa]. 50 kPa: stiffening origami PEA, the
+        Fig 7 target (z = 0.670 m) needs about 13 kPa, the same order as Fig 4's 20 kPa.
+    bend_max : float
+        Asymptotic bend angle produced by one bellows [rad]. 0.45 rad (26 deg) gives
+        |x| ~ 0.2 m at full extension, the X bound of Fig 5A.
+    bend_pressure_scale : float
+        Pressure scale of ``bend = bend_max (1 - exp(-(p - threshold) / scale))`` [Pa]. 25 kPa:
+        the Fig 7 target needs about 25-30 kPa in each of its two bellows.
+    bellows_threshold : float
+        Pressure below which a bellows does not bend the PBA [Pa]. 2 kPa: the "stiffness of the
+        four bellows at low chamber pressure" blamed for oscillation near x = y = 0 (4.3.2).
+    bend_skew : float
+        Rotation of the bend vector about +z from bellows misalignment [rad]. 0.03 rad (1.7 deg)
+        couples x and y weakly, as on a hand-assembled PBA.
+    pea_time_constant : float
+        Time constant of the PEA1&2 chamber pressure at rest length [s]. It grows with the chamber
+        volume, i.e. with ``l1 / pea_rest_length``: 1.2 s at rest, ~1.4 s at the Fig 7 target and
+        ~2 s fully extended ("the large chamber volume of PEA1&2", 3.3).
+    bellows_time_constant : float
+        Time constant of a bellows chamber pressure when unbent [s]. 0.25 s (small chambers).
+    bellows_volume_gain : float
+        Relative growth of a bellows' time constant at full bend (its volume grows as it
+        lengthens) [-]. 0.5: 0.25 s -> 0.375 s.
+    extension_natural_frequency : float
+        Natural angular frequency of the axial mechanics (mass of PEA2, PBA and end on the PEA
+        stiffness) [rad/s]. 3 rad/s (0.48 Hz): slow enough to show the z oscillation of Fig 7.
+    extension_damping : float
+        Damping ratio of the axial mechanics [-]. 0.5: visible overshoot, dies out in a few s.
+    bend_time_constant : float
+        First-order lag of the bend behind its static value [s]. 0.15 s.
+    extension_play : float
+        Half-width of the play (backlash) operator on the extension [m]. 1.5 mm (about 3 mm in
+        z, both PEAs): soft-material hysteresis of about 1 % of the stroke, below the 5 mm
+        accuracy the paper reports so that the arm can settle within it.
+    bend_play : float
+        Half-width of the play operator on each bend component [rad]. 0.005 rad, about 2 mm at
+        the end.
+    valve_voltage_min, valve_voltage_max : float
+        ``U_min``, ``U_max`` of eq. (2) [V]. 0-10 V analogue input assumed for the ITV2050.
+    valve_pressure_min, valve_pressure_max : float
+        ``P_min``, ``P_max`` of eq. (2) [Pa]. 0-900 kPa, the ITV2050's set-pressure range.
+    valve_dead_zone : float
+        Set pressures below this give 0 Pa [Pa]. 4 kPa, "dead zone of the proportional valves at
+        0-4 kPa" (4.3.2).
+    max_substep : float
+        Largest internal integration step [s]; a ``step(dt)`` is split into equal substeps no
+        longer than this. 0.05 s (4 substeps at 5 Hz) keeps the axial oscillator
+        (omega h = 0.15) accurate; pressures are integrated exactly per substep.
+    noise_std : float
+        Standard deviation of the vision noise added per axis by `SoftArmPlant.measure` [m].
+        0 by default (deterministic trials); ~0.5e-3 m mimics the camera.
+    """
+
+    pea_rest_length: float = 0.302
+    extension_max: float = 0.223
+    extension_pressure_scale: float = 50e3
+    bend_max: float = 0.45
+    bend_pressure_scale: float = 25e3
+    bellows_threshold: float = 2e3
+    bend_skew: float = 0.03
+    pea_time_constant: float = 1.2
+    bellows_time_constant: float = 0.25
+    bellows_volume_gain: float = 0.5
+    extension_natural_frequency: float = 3.0
+    extension_damping: float = 0.5
+    bend_time_constant: float = 0.15
+    extension_play: float = 0.0015
+    bend_play: float = 0.005
+    valve_voltage_min: float = 0.0
+    valve_voltage_max: float = 10.0
+    valve_pressure_min: float = 0.0
+    valve_pressure_max: float = 900e3
+    valve_dead_zone: float = 4e3
+    max_substep: float = 0.05
+    noise_std: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not np.isfinite(value):
+                raise ValueError(f'expected finite {name}, got {value}')
+        positive = (
+            'pea_rest_length', 'extension_max', 'extension_pressure_scale', 'bend_max',
+            'bend_pressure_scale', 'pea_time_constant', 'bellows_time_constant',
+            'extension_natural_frequency', 'extension_damping', 'bend_time_constant',
+            'max_substep')
+        for name in positive:
+            if getattr(self, name) <= 0.0:
+                raise ValueError(f'expected {name} > 0, got {getattr(self, name)}')
+        non_negative = ('bellows_threshold', 'bellows_volume_gain', 'extension_play',
+                        'bend_play', 'valve_dead_zone', 'noise_std')
+        for name in non_negative:
+            if getattr(self, name) < 0.0:
+                raise ValueError(f'expected {name} >= 0, got {getattr(self, name)}')
+        if self.valve_voltage_max <= self.valve_voltage_min:
+            raise ValueError('expected valve_voltage_max > valve_voltage_min')
+        if self.valve_pressure_max <= self.valve_pressure_min:
+            raise ValueError('expected valve_pressure_max > valve_pressure_min')
+
+
+class SoftArmPlant:
+    """``n`` independent simulated SRAs stepped together.
+
+    Parameters
+    ----------
+    n : int
+        Number of arms (leading axis of every state array).
+    params : SoftArmPlantParams
+        Plant constants.
+    rng : numpy.random.Generator, optional
+        Source of the measurement noise of `measure` (only used if ``params.noise_std > 0``).
+    """
+
+    def __init__(
+        self,
+        n: int = 1,
+        params: SoftArmPlantParams = SoftArmPlantParams(),  # noqa: B008 (frozen, immutable)
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f'expected n an integer >= 1, got {n!r}')
+        if not isinstance(params, SoftArmPlantParams):
+            raise ValueError(f'expected params a SoftArmPlantParams, got {type(params).__name__}')
+        self.n = int(n)
+        self.params = params
+        self.rng = rng if rng is not None else np.random.default_rng()
+        self._valve_gain = ((params.valve_pressure_max - params.valve_pressure_min)
+                            / (params.valve_voltage_max - params.valve_voltage_min))
+        c, s = np.cos(params.bend_skew), np.sin(params.bend_skew)
+        # bend per bellows B1..B4 -> bend vector (bx, by): B4 - B2 along x, B3 - B1 along y
+        # (each bellows bends away from its own side), then rotated by the skew
+        self._bend_matrix = np.array([[s, -c], [-c, -s], [-s, c], [c, s]])
+        self._play_width = np.array([params.extension_play, params.bend_play, params.bend_play])
+        self._tau_bellows_gain = (params.bellows_time_constant * params.bellows_volume_gain
+                                  / params.bend_max)
+        self.reset()
+
+    # -- state ---------------------------------------------------------------------------------
+
+    def reset(self, end_point: npt.ArrayLike | None = None) -> None:
+        """Put every arm at rest, or at steady state holding ``end_point``.
+
+        Parameters
+        ----------
+        end_point : array-like, shape (3,) or (n, 3), optional
+            Point to hold, in ``sra_mount`` [m]. The chambers are set to `holding_pressures`,
+            the mechanics to rest at that point and the hysteresis centred on it.
+            ``None`` (default): all chambers at 0 Pa, straight arm at ``(0, 0, 0.604)`` m.
+        """
+        n = self.n
+        pressures = None if end_point is None else self.holding_pressures(end_point)
+        self.time = 0.0
+        self._pressure = np.zeros((n, _N_CHAMBERS))
+        self._tau = np.empty((n, _N_CHAMBERS))
+        self._bellows = np.zeros((n, 4))  # static bend per bellows B1..B4 [rad]
+        self._shape = np.zeros((n, 3))  # static (extension [m], bx, by [rad])
+        self._shape_play = np.zeros((n, 3))  # the same after the play operator
+        self._extension = np.zeros(n)
+        self._extension_rate = np.zeros(n)
+        self._bend = np.zeros((n, 2))
+        if pressures is None:
+            return
+        self._pressure[:] = pressures
+        self._update_static_shape()
+        self._shape_play[:] = self._shape
+        self._extension[:] = self._shape[:, 0]
+        self._bend[:] = self._shape[:, 1:]
+
+    @property
+    def chamber_pressures(self) -> npt.NDArray[np.float64]:
+        """Chamber pressures, shape (n, 5), in `CHAMBERS` order [Pa] (a copy)."""
+        return self._pressure.copy()
+
+    @property
+    def end_point(self) -> npt.NDArray[np.float64]:
+        """True end point of every arm, shape (n, 3), in ``sra_mount`` [m]."""
+        p = self.params
+        l1 = p.pea_rest_length + self._extension
+        theta = np.hypot(self._bend[:, 0], self._bend[:, 1])
+        # sin(theta) / theta, finite at theta = 0
+        lateral = l1 * np.sinc(theta / np.pi)
+        return np.stack([lateral * self._bend[:, 0], lateral * self._bend[:, 1],
+                         l1 * (1.0 + np.cos(theta))], axis=-1)
+
+    def measure(self) -> npt.NDArray[np.float64]:
+        """End point as the vision system sees it, shape (n, 3) [m]: `end_point` plus
+        independent Gaussian noise of ``params.noise_std`` per axis."""
+        if self.params.noise_std == 0.0:
+            return self.end_point
+        return self.end_point + self.rng.normal(0.0, self.params.noise_std, (self.n, 3))
+
+    # -- valves, eq. (2) -----------------------------------------------------------------------
+
+    def valve_voltage(self, pressure: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """Control voltage ``u_p`` that asks a valve for ``pressure``, inverse of eq. (2).
+
+        Parameters
+        ----------
+        pressure : array-like, any shape
+            Requested gauge pressure [Pa].
+
+        Returns
+        -------
+        voltage : ndarray, same shape
+            ``u_p = P (U_max - U_min) / (P_max - P_min)``, clipped to ``[U_min, U_max]`` [V].
+        """
+        pr = np.asarray(pressure, dtype=float)
+        if not np.all(np.isfinite(pr)):
+            raise ValueError(f'expected finite pressure [Pa], got {pr}')
+        p = self.params
+        return np.clip(pr / self._valve_gain, p.valve_voltage_min, p.valve_voltage_max)
+
+    def valve_pressure(self, voltage: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """Output pressure of a valve for a control voltage, eq. (2) plus the dead zone.
+
+        Parameters
+        ----------
+        voltage : array-like, any shape
+            Control voltage ``u_p`` [V].
+
+        Returns
+        -------
+        pressure : ndarray, same shape
+            ``P_out = u_p / (U_max - U_min) (P_max - P_min)`` clipped to ``[P_min, P_max]``,
+            and 0 where it is below the dead zone (4 kPa) [Pa].
+        """
+        u = np.asarray(voltage, dtype=float)
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f'expected finite voltage [V], got {u}')
+        p = self.params
+        out = np.clip(u * self._valve_gain, p.valve_pressure_min, p.valve_pressure_max)
+        return np.where(out < p.valve_dead_zone, 0.0, out)
+
+    # -- statics -------------------------------------------------------------------------------
+
+    def _static_shape(
+        self, pressures: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """(extension [m], bend vector (..., 2) [rad], bend per bellows (..., 4) [rad])."""
+        p = self.params
+        extension = p.extension_max * -np.expm1(pressures[..., 0] / -p.extension_pressure_scale)
+        over = np.maximum(pressures[..., 1:] - p.bellows_threshold, 0.0)
+        bellows = p.bend_max * -np.expm1(over / -p.bend_pressure_scale)
+        return extension, bellows @ self._bend_matrix, bellows
+
+    def _update_static_shape(self) -> None:
+        extension, bend, self._bellows = self._static_shape(self._pressure)
+        self._shape[:, 0] = extension
+        self._shape[:, 1:] = bend
+
+    def static_end_point(self, pressures: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """End point at steady state under constant chamber pressures, ignoring hysteresis.
+
+        Parameters
+        ----------
+        pressures : array-like, shape (5,) or (..., 5)
+            Chamber pressures in `CHAMBERS` order [Pa], non-negative.
+
+        Returns
+        -------
+        end_point : ndarray, shape (3,) or (..., 3)
+            In ``sra_mount`` [m]. Steady states reached through the hysteresis lie within
+            ``extension_play`` and ``bend_play`` of it.
+        """
+        pr = np.asarray(pressures, dtype=float)
+        if pr.ndim == 0 or pr.shape[-1] != _N_CHAMBERS:
+            raise ValueError(f'expected pressures of shape (5,) or (..., 5), got {pr.shape}')
+        if not np.all(np.isfinite(pr)) or np.any(pr < 0.0):
+            raise ValueError(f'expected finite non-negative pressures [Pa], got {pr}')
+        extension, bend, _ = self._static_shape(pr)
+        l1 = self.params.pea_rest_length + extension
+        theta = np.hypot(bend[..., 0], bend[..., 1])
+        lateral = l1 * np.sinc(theta / np.pi)
+        return np.stack([lateral * bend[..., 0], lateral * bend[..., 1],
+                         l1 * (1.0 + np.cos(theta))], axis=-1)
+
+    def holding_pressures(self, end_point: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """Chamber pressures whose static shape is ``end_point`` (inverse of `static_end_point`).
+
+        Only the two bellows of the target's quadrant are inflated (Fig 4); the others are 0.
+
+        Parameters
+        ----------
+        end_point : array-like, shape (3,) or (n, 3)
+            Point in ``sra_mount`` [m].
+
+        Returns
+        -------
+        pressures : ndarray, shape (n, 5)
+            In `CHAMBERS` order [Pa].
+
+        Raises
+        ------
+        ValueError
+            If the simulated arm cannot hold the point (too short, too long or bent too far).
+        """
+        pt = np.asarray(end_point, dtype=float)
+        if pt.shape not in ((3,), (self.n, 3)):
+            raise ValueError(f'expected end_point of shape (3,) or ({self.n}, 3), got {pt.shape}')
+        pt = np.broadcast_to(pt, (self.n, 3))
+        p = self.params
+        config = inverse_kinematics(pt)
+        extension = np.asarray(config.pea_length) - p.pea_rest_length
+        if np.any(extension < 0.0) or np.any(extension >= p.extension_max):
+            raise ValueError(
+                f'end_point needs a PEA length outside the simulated range '
+                f'[{p.pea_rest_length:.3f}, {p.pea_rest_length + p.extension_max:.3f}) m')
+        pressures = np.zeros((self.n, _N_CHAMBERS))
+        pressures[:, 0] = -p.extension_pressure_scale * np.log1p(-extension / p.extension_max)
+        theta = np.asarray(config.bend_angle)
+        phi = np.asarray(config.bend_direction) - p.bend_skew
+        bx, by = theta * np.cos(phi), theta * np.sin(phi)
+        need = np.zeros((self.n, 4))  # bend per bellows B1..B4
+        need[:, 3] = np.maximum(bx, 0.0)
+        need[:, 1] = np.maximum(-bx, 0.0)
+        need[:, 2] = np.maximum(by, 0.0)
+        need[:, 0] = np.maximum(-by, 0.0)
+        if np.any(need >= p.bend_max):
+            raise ValueError(
+                f'end_point needs a bend beyond the simulated bellows limit {p.bend_max:.3f} rad')
+        active = need > 0.0
+        pressures[:, 1:] = np.where(
+            active,
+            p.bellows_threshold - p.bend_pressure_scale * np.log1p(-need / p.bend_max),
+            0.0)
+        return pressures
+
+    # -- dynamics ------------------------------------------------------------------------------
+
+    def step(self, pressure_command: npt.ArrayLike, dt: float) -> None:
+        """Apply valve set pressures for ``dt`` seconds.
+
+        Parameters
+        ----------
+        pressure_command : array-like, shape (n, 5) or (5,)
+            Set pressure of each valve in `CHAMBERS` order [Pa] (a (5,) command goes to every
+            arm). Passed through eq. (2): clipped to the valve range, 0 below the dead zone.
+        dt : float
+            Duration [s], > 0; integrated in substeps of at most ``params.max_substep``.
+        """
+        cmd = np.asarray(pressure_command, dtype=float)
+        if cmd.shape not in ((self.n, _N_CHAMBERS), (_N_CHAMBERS,)):
+            raise ValueError(
+                f'expected pressure_command of shape ({self.n}, 5) or (5,), got {cmd.shape}')
+        if not np.isfinite(cmd).all():
+            raise ValueError('expected finite pressure_command [Pa]')
+        if not (dt > 0.0 and np.isfinite(dt)):
+            raise ValueError(f'expected dt > 0 s, got {dt}')
+        p = self.params
+        target = np.minimum(cmd, p.valve_pressure_max)
+        target = np.where(target < max(p.valve_dead_zone, p.valve_pressure_min), 0.0,
+                          np.broadcast_to(target, self._pressure.shape))
+        n_sub = max(1, int(np.ceil(dt / p.max_substep - 1e-9)))
+        h = dt / n_sub
+        w = p.extension_natural_frequency
+        spring = h * w * w
+        damping = 1.0 - h * 2.0 * p.extension_damping * w
+        bend_alpha = -np.expm1(-h / p.bend_time_constant)
+        pressure, tau, shape = self._pressure, self._tau, self._shape
+        for _ in range(n_sub):
+            # chamber volume sets the pneumatic time constant: the PEA's grows with its length,
+            # a bellows' with its own bend (computed from the previous substep's shape)
+            np.multiply(self._extension, p.pea_time_constant / p.pea_rest_length, out=tau[:, 0])
+            tau[:, 0] += p.pea_time_constant
+            np.multiply(self._bellows, self._tau_bellows_gain, out=tau[:, 1:])
+            tau[:, 1:] += p.bellows_time_constant
+            pressure += (target - pressure) * -np.expm1(-h / tau)
+            self._update_static_shape()
+            np.clip(self._shape_play, shape - self._play_width, shape + self._play_width,
+                    out=self._shape_play)
+            # semi-implicit Euler for the axial mass-spring-damper
+            self._extension_rate *= damping
+            self._extension_rate += spring * (self._shape_play[:, 0] - self._extension)
+            self._extension += h * self._extension_rate
+            self._bend += (self._shape_play[:, 1:] - self._bend) * bend_alpha
+        self.time += dt

@@ -1,0 +1,79 @@
+"""arm_sim in-process: joint states carry the load torques; commands and runtime load changes."""
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from inflarm_hw.nodes.arm_sim import ArmSim
+from inflarm_model.elastostatics import motor_torques
+from inflarm_model.kinematics import FlexibleArm
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, SENSOR_QOS
+from ros_harness import spin_until
+
+NOISELESS = [Parameter('noise.position_rad', value=0.0), Parameter('noise.effort_nm', value=0.0)]
+
+
+class Probe:
+    def __init__(self, executor, **overrides) -> None:
+        self.executor = executor
+        self.sim = ArmSim(context=executor.context, parameter_overrides=NOISELESS + [
+            Parameter(k, value=v) for k, v in overrides.items()])
+        self.node = rclpy.create_node('probe', context=executor.context)
+        self.joints: list[JointState] = []
+        self.springs: list[JointState] = []
+        self.node.create_subscription(JointState, 'joint_states', self.joints.append, SENSOR_QOS)
+        self.node.create_subscription(JointState, 'spring_states_truth', self.springs.append,
+                                      SENSOR_QOS)
+        self.command_pub = self.node.create_publisher(
+            JointState, 'motor_position_command', COMMAND_QOS)
+        executor.add_node(self.sim)
+        executor.add_node(self.node)
+        assert spin_until(executor, lambda: len(self.joints) >= 2)
+
+    def wait_new(self, count: int = 3) -> JointState:
+        start = len(self.joints)
+        assert spin_until(self.executor, lambda: len(self.joints) >= start + count)
+        return self.joints[-1]
+
+
+def test_effort_is_the_load_torque_of_the_deflected_arm(executor):
+    probe = Probe(executor)
+    msg = probe.wait_new()
+    assert list(msg.name) == ['joint_1', 'joint_2', 'joint_3']
+    spring = probe.springs[-1]
+    q = FlexibleArm.assemble_q(msg.position, spring.position)
+    expected = motor_torques(FlexibleArm(0.6, 0.03), q, [0.0, 10.0, -15.0])
+    np.testing.assert_allclose(msg.effort, expected, atol=1e-6)
+    assert np.abs(spring.position).max() > 1e-3  # the default load bends the links
+
+
+def test_commands_move_the_motors_and_bad_ones_are_rejected(executor):
+    probe = Probe(executor)
+    probe.command_pub.publish(JointState(name=['joint_1'], position=[float('nan')]))
+    probe.command_pub.publish(JointState(name=['elbow'], position=[0.3]))
+    probe.wait_new(5)
+    np.testing.assert_allclose(probe.sim.sim.target, [0.0, 0.6, -1.2])
+
+    probe.command_pub.publish(JointState(name=['joint_1', 'joint_3'], position=[0.2, -1.0]))
+    assert spin_until(executor, lambda: abs(probe.joints[-1].position[0] - 0.2) < 1e-4,
+                      timeout_s=10.0)
+    np.testing.assert_allclose(probe.joints[-1].position, [0.2, 0.6, -1.0], atol=1e-4)
+
+
+def test_the_tip_load_changes_at_runtime_and_bad_loads_are_rejected(executor):
+    probe = Probe(executor)
+    bad = probe.sim.set_parameters([Parameter('tip_force_n', value=[1.0, float('nan'), 0.0])])
+    assert not bad[0].successful and 'tip_force_n' in bad[0].reason
+    assert probe.sim.set_parameters([Parameter('tip_force_n', value=[0.0, 0.0, 0.0])])[0] \
+        .successful
+    msg = probe.wait_new()
+    np.testing.assert_allclose(msg.effort, 0.0, atol=1e-9)
+    np.testing.assert_allclose(probe.springs[-1].position, 0.0, atol=1e-9)
+
+
+def test_inconsistent_parameters_fail_at_startup(ros_context):
+    with pytest.raises(ValueError, match='initial_motor_positions_rad'):
+        ArmSim(context=ros_context, parameter_overrides=[
+            Parameter('initial_motor_positions_rad', value=[0.0, 1.0])])
