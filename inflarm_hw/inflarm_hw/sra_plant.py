@@ -172,11 +172,21 @@ class SoftArmPlant:
     ) -> None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f'expected n an integer >= 1, got {n!r}')
-        if not isinstance(params, SoftArmPlantParams):
-            raise ValueError(f'expected params a SoftArmPlantParams, got {type(params).__name__}')
         self.n = int(n)
         self.params = params
         self.rng = rng if rng is not None else np.random.default_rng()
+        self.reset()
+
+    @property
+    def params(self) -> SoftArmPlantParams:
+        """Plant constants; assigning new ones (e.g. another noise level) keeps the state."""
+        return self._params
+
+    @params.setter
+    def params(self, params: SoftArmPlantParams) -> None:
+        if not isinstance(params, SoftArmPlantParams):
+            raise ValueError(f'expected params a SoftArmPlantParams, got {type(params).__name__}')
+        self._params = params
         self._valve_gain = ((params.valve_pressure_max - params.valve_pressure_min)
                             / (params.valve_voltage_max - params.valve_voltage_min))
         c, s = np.cos(params.bend_skew), np.sin(params.bend_skew)
@@ -186,7 +196,6 @@ class SoftArmPlant:
         self._play_width = np.array([params.extension_play, params.bend_play, params.bend_play])
         self._tau_bellows_gain = (params.bellows_time_constant * params.bellows_volume_gain
                                   / params.bend_max)
-        self.reset()
 
     # -- state ---------------------------------------------------------------------------------
 

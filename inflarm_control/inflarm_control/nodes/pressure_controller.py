@@ -21,7 +21,8 @@ Services (std_srvs/Trigger):
         arm returns to rest, where the paper's trials start (eq. 3: outputs start at 0 kPa).
     ~/reset_learning: forget every ILC memory (and the memory file).
 Parameters:
-    rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, quadrant_bellows (read-only),
+    rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, learning.*, quadrant_bellows
+        (read-only),
     trial_duration_s, measurement_timeout_s, reach_tolerance_m, path_tolerance_m,
     ilc_memory_path, knowledge_db_path (read-only), frame_id (read-only).
 """
@@ -66,6 +67,17 @@ PARAMETERS = (
               'P_set of eq. 4 per axis: cap of the learned feedforward [Pa]', read_only=True),
     Parameter('limits.p_max_pa', list(_DEFAULTS.p_max),
               f"valve output limit per chamber {', '.join(CHAMBERS)} [Pa]", read_only=True),
+    Parameter('learning.gain', list(_DEFAULTS.learning_gain),
+              'ILC update gain L per axis [Pa/m] (inflarm_control/README.md)', read_only=True),
+    Parameter('learning.lead_steps', list(_DEFAULTS.learning_lead_steps),
+              'ILC phase lead per axis [control steps]', read_only=True),
+    Parameter('learning.filter_steps', _DEFAULTS.learning_filter_steps,
+              'moving-average length of the ILC update [steps]', range=(1, 50), read_only=True),
+    Parameter('learning.dead_band_m', _DEFAULTS.learning_dead_band,
+              'errors below this teach nothing [m]', range=(0.0, 0.1), read_only=True),
+    Parameter('learning.feedback_gain', list(_DEFAULTS.learning_feedback_gain),
+              "share of the trial's final PID correction kept in the memory, per axis",
+              read_only=True),
     Parameter('quadrant_bellows', [','.join(pair) for pair in _DEFAULTS.quadrant_bellows],
               "bellows driving x,y in quadrants 1-4 (Fig 4: 'B4,B3', 'B2,B3', 'B2,B1', 'B4,B1')",
               read_only=True),
@@ -99,7 +111,11 @@ class PressureController(Node):
         self.core_params = PidIlcParams(
             kp=tuple(p['gains.kp']), ki=tuple(p['gains.ki']), kd=tuple(p['gains.kd']),
             p_set=tuple(p['limits.p_set_pa']), p_max=tuple(p['limits.p_max_pa']),
-            rate_hz=p['rate_hz'],
+            rate_hz=p['rate_hz'], learning_gain=tuple(p['learning.gain']),
+            learning_lead_steps=tuple(p['learning.lead_steps']),
+            learning_filter_steps=p['learning.filter_steps'],
+            learning_dead_band=p['learning.dead_band_m'],
+            learning_feedback_gain=tuple(p['learning.feedback_gain']),
             quadrant_bellows=tuple(tuple(q.split(',')) for q in p['quadrant_bellows']))
         self.controller = PidIlcController(n=1, params=self.core_params)
         self.dt = 1.0 / p['rate_hz']
