@@ -23,6 +23,8 @@ setup(
         'console_scripts': [
             'pressure_controller = inflarm_control.nodes.pressure_controller:main',
             'trial_runner = inflarm_control.nodes.trial_runner:main',
+            'inflarm-build-knowledge = inflarm_control.knowledge_cli:main',
+            'inflarm-sra-experiments = inflarm_control.sra_experiments:main',
         ],
     },
 )

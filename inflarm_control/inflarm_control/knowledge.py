@@ -1,0 +1,907 @@
+"""Experiential knowledge database for the iterative learning controller (section 3.2 of 001_...).
+
+The positive-pressure workspace of the arm (paper section 2.2: x, y in -202..202 mm, z in
+574..990 mm) is meshed with 1 cm "knowledge points". For every point the database keeps the
+control information of the last of 30 learning trials that drove the arm from the home point to
+that point: the ILC memory ``PidIlcController.finish_trial`` returns, i.e. chamber pressures for
+the first 10 s at the 5 Hz control rate, 50 steps x 5 chambers, one uint16 each. A new task seeds
+its first trial with the memory of the nearest knowledge point (`seed_memory`), so the iterative
+learning controller starts "experienced" (eqs. (1), (4) of 001_...).
+
+`build_knowledge_database` runs those trials on the simulated arm (``inflarm_hw.sra_plant``),
+thousands of points at once; `KnowledgeDatabase` stores them in one memory-mapped file;
+`nearest_knowledge_point` snaps a target to the grid without any file.
+
+Frame and units: everything here is in the mount frame ``sra_mount`` in metres (origin at the
+mount, z along PEA1 pointing away from the mount) and pascals. Convert the paper's millimetres
+at the edges.
+
+Default grid (67,200 points, the paper's 40 x 40 x 42)::
+
+    x, y in {-0.19, -0.18, ..., 0.20} m   (40 values each)
+    z    in { 0.58,  0.59, ..., 0.99} m   (42 values)
+
+Whole-centimetre values reproduce the paper's example: target (111, 98, 733) mm -> knowledge
+point (110, 100, 730) mm. A point belongs to the grid when it lies in the cell of a grid point,
+i.e. within half a spacing of the outermost grid values: x, y in [-0.195, 0.205) m and z in
+[0.575, 0.995) m; anything else is rejected with a ValueError naming the bound. (The 40 values
+per horizontal axis cannot be symmetric about 0 on a whole-centimetre grid, so the workspace
+strip x or y in [-0.202, -0.195) m is not covered.)
+
+File format (version 1, little-endian, one memory-mapped file)::
+
+    offset  size  field
+         0     8  magic b'INFLKDB\\x00'
+         8     4  u32 version (1)
+        12     4  u32 header size (128)
+        16    24  3 x f64 grid origin [m]
+        40     8  f64 grid spacing [m]
+        48    12  3 x u32 grid shape (nx, ny, nz)
+        60     4  u32 steps per point (50)
+        64     4  u32 chambers (5, order ``CHAMBERS``)
+        68     4  reserved (0)
+        72     8  f64 control rate [Hz] (5.0)
+        80     8  f64 pressure scale [Pa per LSB]
+        88     8  u64 mask offset (128)
+        96     8  u64 data offset
+       104     8  u64 total file size [bytes]
+       112    12  reserved (0)
+       124     4  u32 CRC-32 of bytes 0..123
+       128     n  u8 filled mask, one byte per point (0 or 1), padded to a multiple of 64
+  data_off       u16 codes, C order (point, step, chamber)
+
+Points are numbered in C order over (ix, iy, iz): ``index = (ix * ny + iy) * nz + iz``. The data
+section of the full grid is 67,200 x 50 x 5 x 2 = 33,600,000 B (the paper's 32.04 MiB); the
+header and mask add 67,328 B. Pressures are stored as ``code = round(p / scale)`` clamped to
+[0, 65535], decoded as ``p = code * scale``. The default 15 Pa/LSB gives a full scale of
+983.025 kPa, above the 0-900 kPa range of the ITV2050 valves (and the controller's 100 kPa output
+limit), with a round-trip error of at most 7.5 Pa.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import os
+from pathlib import Path
+import struct
+import zlib
+
+import numpy as np
+import numpy.typing as npt
+
+from inflarm_control.pid_ilc import PidIlcController, PidIlcParams, run_trials
+from inflarm_model.soft_arm import CHAMBERS
+
+__all__ = [
+    'DEFAULT_GRID',
+    'DEFAULT_SCALE_PA_PER_LSB',
+    'HOME_POINT',
+    'N_CHAMBERS',
+    'KnowledgeDatabase',
+    'KnowledgeGrid',
+    'build_knowledge_database',
+    'decode_pressure',
+    'encode_pressure',
+    'nearest_knowledge_point',
+    'seed_memory',
+]
+
+#: Chambers per knowledge point, in ``CHAMBERS`` order (PEA, B1, B2, B3, B4).
+N_CHAMBERS = len(CHAMBERS)
+#: Pressure resolution of the stored codes [Pa per LSB]: 983.025 kPa full scale, above the
+#: 900 kPa range of the ITV2050 valves, so no valve output can clamp; the +-7.5 Pa rounding
+#: moves the simulated end point by less than 0.1 mm.
+DEFAULT_SCALE_PA_PER_LSB = 15.0
+#: Start point of every learning trial, the paper's (0, 0, 604) mm [m, sra_mount].
+HOME_POINT = (0.0, 0.0, 0.604)
+
+_MAGIC = b'INFLKDB\x00'
+_VERSION = 1
+_HEADER_SIZE = 128
+_HEADER = struct.Struct('<8sII3dd3IIIIddQQQ12x')
+_CRC = struct.Struct('<I')
+_CRC_OFFSET = _HEADER_SIZE - _CRC.size
+_MASK_ALIGN = 64
+_CODE_MAX = 65535
+_AXES = ('x', 'y', 'z')
+# Rounding offset in cells: 0.5 plus a hair, so the inclusive lower bound survives float error
+# ((-0.195 + 0.19) / 0.01 is -0.4999999...).
+_HALF = 0.5 + 1e-9
+
+
+@dataclass(frozen=True)
+class KnowledgeGrid:
+    """
+    A regular grid of knowledge points in the mount frame.
+
+    Parameters
+    ----------
+    origin : tuple of 3 float
+        Grid point with index (0, 0, 0) [m, sra_mount].
+    spacing : float
+        Distance between neighbouring grid points along every axis [m].
+    shape : tuple of 3 int
+        Number of grid values along x, y and z.
+    """
+
+    origin: tuple[float, float, float] = (-0.19, -0.19, 0.58)
+    spacing: float = 0.01
+    shape: tuple[int, int, int] = (40, 40, 42)
+    # Grid values per axis as plain floats, so single lookups need no numpy.
+    _values: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        origin = np.asarray(self.origin, dtype=float)
+        if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+            raise ValueError(f'expected origin of 3 finite floats [m], got {self.origin!r}')
+        spacing = float(self.spacing)
+        if not (math.isfinite(spacing) and spacing > 0.0):
+            raise ValueError(f'expected spacing > 0 [m], got {self.spacing!r}')
+        shape = tuple(self.shape)
+        if len(shape) != 3 or not all(
+            isinstance(n, int | np.integer) and 1 <= n < 2**32 for n in shape
+        ):
+            raise ValueError(f'expected shape of 3 positive ints, got {self.shape!r}')
+        object.__setattr__(self, 'origin', tuple(float(v) for v in origin))
+        object.__setattr__(self, 'spacing', spacing)
+        object.__setattr__(self, 'shape', tuple(int(n) for n in shape))
+        values = tuple(
+            tuple(round(o + i * spacing, 9) for i in range(n))
+            for o, n in zip(self.origin, self.shape, strict=True)
+        )
+        object.__setattr__(self, '_values', values)
+
+    @property
+    def size(self) -> int:
+        """Number of knowledge points."""
+        nx, ny, nz = self.shape
+        return nx * ny * nz
+
+    @property
+    def lower(self) -> tuple[float, float, float]:
+        """Inclusive lower corner of the covered box, half a spacing below the grid [m]."""
+        return tuple(o - 0.5 * self.spacing for o in self.origin)
+
+    @property
+    def upper(self) -> tuple[float, float, float]:
+        """Exclusive upper corner of the covered box, half a spacing above the grid [m]."""
+        return tuple(
+            o + (n - 0.5) * self.spacing for o, n in zip(self.origin, self.shape, strict=True)
+        )
+
+    def index_of(self, point: npt.ArrayLike) -> int | npt.NDArray[np.int64]:
+        """
+        Flat index of the knowledge point nearest to each point.
+
+        Parameters
+        ----------
+        point : array-like, shape (3,) or (N, 3)
+            Positions [m, sra_mount], inside the covered box (``lower`` <= p < ``upper``).
+
+        Returns
+        -------
+        int or ndarray of int64, shape (N,)
+            ``(ix * ny + iy) * nz + iz``; ties halfway between grid values go up.
+
+        Raises
+        ------
+        ValueError
+            If the shape is wrong, a value is not finite or a point is outside the grid.
+        """
+        if _is_single_point(point):
+            return self._flat_index(*_coerce_point(point))[0]
+        ijk = self._ijk_of(_coerce_points(point, 'point'))
+        return np.ravel_multi_index(tuple(ijk.T), self.shape).astype(np.int64)
+
+    def point_of(self, index: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """
+        Position of knowledge points given their flat indices.
+
+        Parameters
+        ----------
+        index : int or array-like of int, shape (N,)
+            Flat indices in ``[0, size)``.
+
+        Returns
+        -------
+        ndarray, shape (3,) or (N, 3)
+            Grid positions [m, sra_mount], rounded to 1 nm so that 1 cm grids print exactly.
+        """
+        idx = _coerce_indices(index, self.size)
+        ijk = np.stack(np.unravel_index(idx, self.shape), axis=-1)
+        points = np.round(np.asarray(self.origin) + ijk * self.spacing, 9)
+        return points[0] if np.ndim(index) == 0 else points
+
+    def points(self) -> npt.NDArray[np.float64]:
+        """All knowledge points in flat-index order, shape (size, 3) [m, sra_mount]."""
+        return self.point_of(np.arange(self.size))
+
+    def nearest(self, point: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """
+        Knowledge point nearest to each point.
+
+        Parameters
+        ----------
+        point : array-like, shape (3,) or (N, 3)
+            Positions [m, sra_mount] inside the covered box.
+
+        Returns
+        -------
+        ndarray, shape (3,) or (N, 3)
+            Grid positions [m, sra_mount].
+        """
+        if _is_single_point(point):
+            return np.array(self._flat_index(*_coerce_point(point))[1:])
+        return self.point_of(self.index_of(point))
+
+    def _flat_index(self, x: float, y: float, z: float) -> tuple[int, float, float, float]:
+        # Plain-float arithmetic: numpy per-call overhead would dominate a single lookup.
+        (ox, oy, oz), s, (nx, ny, nz) = self.origin, self.spacing, self.shape
+        ix = math.floor((x - ox) / s + _HALF)
+        iy = math.floor((y - oy) / s + _HALF)
+        iz = math.floor((z - oz) / s + _HALF)
+        if not (0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz):
+            self._raise_outside(np.array([[x, y, z]]))
+        xs, ys, zs = self._values
+        return (ix * ny + iy) * nz + iz, xs[ix], ys[iy], zs[iz]
+
+    def _ijk_of(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
+        ijk = np.floor((points - np.asarray(self.origin)) / self.spacing + _HALF).astype(np.int64)
+        if np.any((ijk < 0) | (ijk >= np.asarray(self.shape))):
+            self._raise_outside(points)
+        return ijk
+
+    def _raise_outside(self, points: npt.NDArray[np.float64]) -> None:
+        ijk = np.floor((points - np.asarray(self.origin)) / self.spacing + _HALF)
+        bad = (ijk < 0) | (ijk >= np.asarray(self.shape))
+        row, axis = (int(v) for v in np.argwhere(bad)[0])
+        raise ValueError(
+            f'expected point {_AXES[axis]} in [{self.lower[axis]:.4f}, {self.upper[axis]:.4f})'
+            f' m (knowledge grid, sra_mount frame), got {float(points[row, axis])!r}'
+            + (f' at row {row}' if len(points) > 1 else '')
+        )
+
+
+#: The paper's 40 x 40 x 42 grid with 1 cm spacing (67,200 points).
+DEFAULT_GRID = KnowledgeGrid()
+
+
+def nearest_knowledge_point(
+    point: npt.ArrayLike, grid: KnowledgeGrid = DEFAULT_GRID
+) -> npt.NDArray[np.float64]:
+    """
+    Knowledge point nearest to a target (section 3.2 of 001_...).
+
+    Parameters
+    ----------
+    point : array-like, shape (3,) or (N, 3)
+        Target positions [m, sra_mount].
+    grid : KnowledgeGrid, optional
+        Grid to snap to; the paper's 1 cm, 40 x 40 x 42 grid by default.
+
+    Returns
+    -------
+    ndarray, shape (3,) or (N, 3)
+        Nearest grid positions [m, sra_mount], e.g. (0.111, 0.098, 0.733) -> (0.11, 0.10, 0.73).
+
+    Raises
+    ------
+    ValueError
+        If a point is outside the grid (the message names the violated bound) or malformed.
+    """
+    if not isinstance(grid, KnowledgeGrid):
+        raise ValueError(f'expected grid to be a KnowledgeGrid, got {type(grid).__name__}')
+    return grid.nearest(point)
+
+
+class KnowledgeDatabase:
+    """
+    Memory-mapped store of the learned chamber pressures of every knowledge point.
+
+    Build one with :meth:`create` (or :func:`build_knowledge_database`) and reopen it with
+    :meth:`open`. Nothing is read eagerly: opening maps the file and checks its header.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The database file.
+    grid : KnowledgeGrid
+        The knowledge points.
+    steps : int
+        Control steps per point (50 for 10 s at 5 Hz).
+    rate_hz : float
+        Control rate the steps were recorded at [Hz].
+    scale : float
+        Pressure resolution of the stored codes [Pa per LSB].
+    mode : str
+        ``'r'`` (read only) or ``'r+'`` (read and write).
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        grid: KnowledgeGrid,
+        steps: int,
+        rate_hz: float,
+        scale: float,
+        mode: str,
+        layout: tuple[int, int, int],
+    ) -> None:
+        # Private: use create() or open(), which validate the file first.
+        self.path = path
+        self.grid = grid
+        self.steps = steps
+        self.rate_hz = rate_hz
+        self.scale = scale
+        self.mode = mode
+        mask_offset, data_offset, _ = layout
+        self._map = np.memmap(path, dtype=np.uint8, mode=mode)
+        # Plain ndarray views: indexing a memmap subclass costs a few us per call.
+        raw = self._map.view(np.ndarray)
+        self._mask = raw[mask_offset : mask_offset + grid.size]
+        self._data = (
+            raw[data_offset:].view('<u2').reshape(grid.size, steps, N_CHAMBERS)
+        )
+
+    @classmethod
+    def create(
+        cls,
+        path: str | os.PathLike,
+        grid: KnowledgeGrid = DEFAULT_GRID,
+        steps: int = 50,
+        rate_hz: float = 5.0,
+        scale: float = DEFAULT_SCALE_PA_PER_LSB,
+        overwrite: bool = False,
+    ) -> KnowledgeDatabase:
+        """
+        Create an empty database file (nothing filled) and open it for writing.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            File to create. Its size is fixed by the grid: the data alone is
+            ``grid.size * steps * 5 * 2`` bytes (sparse until written where supported).
+        grid : KnowledgeGrid, optional
+            Knowledge points; the paper's 67,200-point grid by default.
+        steps : int, optional
+            Control steps stored per point (50 = the first 10 s at 5 Hz).
+        rate_hz : float, optional
+            Control rate of the steps [Hz].
+        scale : float, optional
+            Pressure per stored LSB [Pa]; full scale is ``65535 * scale``.
+        overwrite : bool, optional
+            Replace an existing file instead of raising.
+
+        Returns
+        -------
+        KnowledgeDatabase
+            Opened in mode ``'r+'``.
+        """
+        if not isinstance(grid, KnowledgeGrid):
+            raise ValueError(f'expected grid to be a KnowledgeGrid, got {type(grid).__name__}')
+        if not (isinstance(steps, int | np.integer) and 1 <= steps < 2**32):
+            raise ValueError(f'expected steps to be a positive int, got {steps!r}')
+        rate_hz, scale = float(rate_hz), float(scale)
+        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+            raise ValueError(f'expected rate_hz > 0 [Hz], got {rate_hz!r}')
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ValueError(f'expected scale > 0 [Pa per LSB], got {scale!r}')
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise ValueError(f'expected path to not exist (or overwrite=True), got {str(path)!r}')
+        layout = _layout(grid, int(steps))
+        header = _HEADER.pack(
+            _MAGIC, _VERSION, _HEADER_SIZE, *grid.origin, grid.spacing, *grid.shape,
+            int(steps), N_CHAMBERS, 0, rate_hz, scale, *layout,
+        )
+        with open(path, 'wb') as f:
+            f.write(header + _CRC.pack(zlib.crc32(header)))
+            # Extending with truncate keeps the file sparse: creation costs no 32 MB write.
+            f.truncate(layout[2])
+        return cls(path, grid, int(steps), rate_hz, scale, 'r+', layout)
+
+    @classmethod
+    def open(cls, path: str | os.PathLike, mode: str = 'r') -> KnowledgeDatabase:
+        """
+        Map an existing database file, checking its header but reading no pressures.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            A file written by :meth:`create`.
+        mode : {'r', 'r+'}, optional
+            Read only, or read and write.
+
+        Returns
+        -------
+        KnowledgeDatabase
+
+        Raises
+        ------
+        ValueError
+            If the mode is unknown, or the file is not a version-1 knowledge database, its
+            header is corrupt (CRC) or inconsistent, or it is truncated.
+        """
+        if mode not in ('r', 'r+'):
+            raise ValueError(f"expected mode 'r' or 'r+', got {mode!r}")
+        path = Path(path)
+        with open(path, 'rb') as f:
+            head = f.read(_HEADER_SIZE)
+            file_size = os.fstat(f.fileno()).st_size
+        name = str(path)
+        if len(head) < _HEADER_SIZE:
+            raise ValueError(
+                f'expected a knowledge database of at least {_HEADER_SIZE} B at {name!r},'
+                f' got {len(head)} B (truncated header)'
+            )
+        fields = _HEADER.unpack(head[:_CRC_OFFSET])
+        if fields[0] != _MAGIC:
+            raise ValueError(
+                f'expected a knowledge database at {name!r} (magic {_MAGIC!r}),'
+                f' got magic {fields[0]!r}'
+            )
+        if fields[1] != _VERSION:
+            raise ValueError(f'expected knowledge database version {_VERSION}, got {fields[1]}')
+        (crc,) = _CRC.unpack(head[_CRC_OFFSET:])
+        if crc != zlib.crc32(head[:_CRC_OFFSET]):
+            raise ValueError(f'knowledge database header at {name!r} is corrupt (CRC mismatch)')
+        header_size, origin, spacing, shape = fields[2], fields[3:6], fields[6], fields[7:10]
+        steps, chambers, rate_hz, scale = fields[10], fields[11], fields[13], fields[14]
+        layout = tuple(fields[15:18])
+        try:
+            grid = KnowledgeGrid(origin=origin, spacing=spacing, shape=shape)
+        except ValueError as err:
+            raise ValueError(f'knowledge database at {name!r} has an invalid grid: {err}') from err
+        if (
+            header_size != _HEADER_SIZE
+            or chambers != N_CHAMBERS
+            or steps < 1
+            or not (rate_hz > 0.0 and scale > 0.0)
+            or layout != _layout(grid, steps)
+        ):
+            raise ValueError(f'knowledge database header at {name!r} is inconsistent')
+        if file_size != layout[2]:
+            raise ValueError(
+                f'expected knowledge database {name!r} of {layout[2]} B, got {file_size} B'
+                + (' (truncated)' if file_size < layout[2] else '')
+            )
+        db = cls(path, grid, steps, rate_hz, scale, mode, layout)
+        if np.any(db._mask > 1):  # 67 kB: cheap, and catches a garbled mask section
+            raise ValueError(f'knowledge database at {name!r} has a corrupt filled mask')
+        return db
+
+    def __enter__(self) -> KnowledgeDatabase:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return (
+            f'KnowledgeDatabase({str(self.path)!r}, mode={self.mode!r}, grid={self.grid},'
+            f' steps={self.steps}, filled={self.n_filled}/{self.grid.size})'
+        )
+
+    @property
+    def filled(self) -> npt.NDArray[np.bool_]:
+        """Read-only mask of the points holding a memory, shape (size,) in flat-index order."""
+        mask = self._mask.view(np.bool_)
+        mask.flags.writeable = False
+        return mask
+
+    @property
+    def n_filled(self) -> int:
+        """Number of points holding a memory."""
+        return int(np.count_nonzero(self._mask))
+
+    def has(self, index: int) -> bool:
+        """Whether the knowledge point with this flat index holds a memory."""
+        self._check_open()
+        (idx,) = _coerce_indices(index, self.grid.size)
+        return bool(self._mask[idx])
+
+    def lookup(
+        self, point: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """
+        Memory of the knowledge point nearest to a target.
+
+        Parameters
+        ----------
+        point : array-like, shape (3,)
+            Target position [m, sra_mount], inside the grid.
+
+        Returns
+        -------
+        grid_point : ndarray, shape (3,)
+            The nearest knowledge point [m, sra_mount].
+        memory : ndarray, shape (steps, 5)
+            Its chamber output pressures per control step [Pa], chambers in ``CHAMBERS`` order.
+
+        Raises
+        ------
+        ValueError
+            If the point is malformed or outside the grid.
+        KeyError
+            If the nearest knowledge point holds no memory yet.
+        """
+        if self._mask is None:
+            self._check_open()
+        idx, gx, gy, gz = self.grid._flat_index(*_coerce_point(point))
+        if not self._mask[idx]:
+            raise KeyError(f'knowledge point {(gx, gy, gz)} (index {idx}) holds no memory')
+        # astype + in-place scale is ~1 us faster than a mixed-type multiply.
+        memory = self._data[idx].astype(np.float64)
+        if self.scale != 1.0:
+            memory *= self.scale
+        return np.array((gx, gy, gz)), memory
+
+    def read(self, index: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """
+        Memories of knowledge points given their flat indices.
+
+        Parameters
+        ----------
+        index : int or array-like of int, shape (N,)
+            Flat indices of filled points.
+
+        Returns
+        -------
+        ndarray, shape (steps, 5) or (N, steps, 5)
+            Chamber output pressures [Pa].
+
+        Raises
+        ------
+        KeyError
+            If a point holds no memory.
+        """
+        self._check_open()
+        idx = _coerce_indices(index, self.grid.size)
+        empty = idx[self._mask[idx] == 0]
+        if empty.size:
+            raise KeyError(f'knowledge point index {int(empty[0])} holds no memory')
+        memory = self._data[idx] * self.scale
+        return memory[0] if np.ndim(index) == 0 else memory
+
+    def write(self, index: npt.ArrayLike, memory: npt.ArrayLike) -> None:
+        """
+        Store memories of knowledge points and mark them filled.
+
+        Parameters
+        ----------
+        index : int or array-like of int, shape (N,)
+            Flat indices.
+        memory : array-like, shape (steps, 5) or (N, steps, 5)
+            Chamber output pressures [Pa]; rounded to the nearest LSB and clamped to
+            ``[0, 65535 * scale]``.
+
+        Raises
+        ------
+        ValueError
+            If the database is read only, or an index or the memory is malformed.
+        """
+        self._check_open()
+        if self.mode != 'r+':
+            raise ValueError(f"expected a database opened with mode 'r+', got mode {self.mode!r}")
+        idx = _coerce_indices(index, self.grid.size)
+        memory = np.asarray(memory, dtype=float)
+        expected = (len(idx), self.steps, N_CHAMBERS)
+        if memory.shape != expected and not (
+            np.ndim(index) == 0 and memory.shape == expected[1:]
+        ):
+            raise ValueError(f'expected memory of shape {expected} [Pa], got {memory.shape}')
+        if not np.all(np.isfinite(memory)):
+            raise ValueError('expected finite memory [Pa], got NaN or inf')
+        self._data[idx] = encode_pressure(memory, self.scale).reshape(expected)
+        # Data before mask, so an interrupted build never marks a point with stale codes.
+        self._mask[idx] = 1
+
+    def flush(self) -> None:
+        """Write pending changes to disk."""
+        if self.mode == 'r+' and self._map is not None:
+            self._map.flush()
+
+    def _check_open(self) -> None:
+        if self._map is None:
+            raise ValueError(f'expected an open database, {str(self.path)!r} is closed')
+
+    def close(self) -> None:
+        """Flush and release the mapping (the views die with it)."""
+        self.flush()
+        self._map = self._mask = self._data = None
+
+
+def seed_memory(db: KnowledgeDatabase, target: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """
+    ILC memory for the first trial of a new task: that of the nearest knowledge point.
+
+    Pass the result as ``memory`` to ``PidIlcController.start_trial`` (or ``run_trials``); the
+    tasks must start from the point the database was built from (``HOME_POINT`` by default).
+
+    Parameters
+    ----------
+    db : KnowledgeDatabase
+        A (partly) built database.
+    target : array-like, shape (3,) or (N, 3)
+        Task targets [m, sra_mount], inside ``db.grid``.
+
+    Returns
+    -------
+    ndarray, shape (steps, 5) or (N, steps, 5)
+        Chamber output pressures per control step [Pa], in ``CHAMBERS`` order.
+
+    Raises
+    ------
+    ValueError
+        If a target is malformed or outside the grid.
+    KeyError
+        If a nearest knowledge point holds no memory (start with ``memory=None``, PID alone).
+    """
+    if not isinstance(db, KnowledgeDatabase):
+        raise ValueError(f'expected db to be a KnowledgeDatabase, got {type(db).__name__}')
+    if _is_single_point(target):
+        return db.lookup(target)[1]
+    return db.read(db.grid.index_of(target))
+
+
+@dataclass(frozen=True)
+class _BuildJob:
+    # Everything a (possibly forked) worker needs to learn one batch of knowledge points.
+    path: Path
+    grid: KnowledgeGrid
+    start: tuple[float, float, float]
+    n_trials: int
+    plant_params: object
+    controller_params: PidIlcParams
+
+
+def _learn(job: _BuildJob, index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+    # Imported here: the plant is a simulation backend, only the build needs it.
+    from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+
+    params = SoftArmPlantParams() if job.plant_params is None else job.plant_params
+    plant = SoftArmPlant(len(index), params)
+    controller = PidIlcController(len(index), job.controller_params)
+    rate_hz = job.controller_params.rate_hz
+    result = run_trials(
+        plant,
+        controller,
+        job.start,
+        job.grid.point_of(index),
+        job.n_trials,
+        duration_s=job.controller_params.memory_steps / rate_hz,
+        dt=1.0 / rate_hz,
+        keep_trajectories=False,
+    )
+    return result.memory
+
+
+_WORKER: dict[str, object] = {}
+
+
+def _worker_init(job: _BuildJob) -> None:
+    _WORKER['job'] = job
+    _WORKER['db'] = KnowledgeDatabase.open(job.path, mode='r+')
+
+
+def _worker_batch(index: npt.NDArray[np.int64]) -> int:
+    # Workers write straight into the shared mapping: batches are disjoint.
+    db = _WORKER['db']
+    db.write(index, _learn(_WORKER['job'], index))
+    db.flush()
+    return len(index)
+
+
+def build_knowledge_database(
+    path: str | os.PathLike,
+    grid: KnowledgeGrid = DEFAULT_GRID,
+    *,
+    n_trials: int = 30,
+    batch_size: int = 4096,
+    start: npt.ArrayLike = HOME_POINT,
+    plant_params: object | None = None,
+    controller_params: PidIlcParams | None = None,
+    scale: float = DEFAULT_SCALE_PA_PER_LSB,
+    workers: int | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> KnowledgeDatabase:
+    """
+    Learn every knowledge point on the simulated arm and store it (section 3.2 of 001_...).
+
+    For each point the task ``start -> point`` is repeated ``n_trials`` times with the PID +
+    iterative learning controller (each trial feeding the next, eqs. (1), (3), (4)), and the
+    chamber outputs of the first ``memory_steps`` steps of the last trial are stored. Points are
+    simulated ``batch_size`` arms at a time (``inflarm_hw.sra_plant.SoftArmPlant`` is vectorized
+    over arms), optionally in several processes. An existing file is resumed: only points not yet
+    filled are learned, so an interrupted build can be restarted.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Database file; created if missing, resumed if present (unless ``overwrite``).
+    grid : KnowledgeGrid, optional
+        Knowledge points; the paper's 67,200 by default.
+    n_trials : int, optional
+        Learning trials per point (30 in the paper).
+    batch_size : int, optional
+        Arms simulated together; a few thousand keeps the arrays in cache.
+    start : array-like, shape (3,), optional
+        Start point of every trial [m, sra_mount]; the paper's (0, 0, 0.604) m.
+    plant_params : inflarm_hw.sra_plant.SoftArmPlantParams, optional
+        Simulated plant; its defaults if None.
+    controller_params : PidIlcParams, optional
+        Controller gains; its defaults if None. Its ``memory_steps`` and ``rate_hz`` become the
+        database's ``steps`` and ``rate_hz`` (10 s at 5 Hz by default).
+    scale : float, optional
+        Pressure per stored LSB [Pa]; must cover the controller's ``p_max``.
+    workers : int, optional
+        Processes learning batches in parallel, forked (POSIX only) and writing disjoint points;
+        one per CPU by default, 1 learns in this process. The full grid takes ~85 s with 2
+        workers on 2 cores, ~170 s with 1 (the plant's substeps dominate).
+    overwrite : bool, optional
+        Start from an empty file even if ``path`` exists.
+    progress : bool, optional
+        Show a tqdm progress bar over points.
+
+    Returns
+    -------
+    KnowledgeDatabase
+        The database, opened in mode ``'r+'``, every point filled.
+
+    Raises
+    ------
+    ValueError
+        On bad arguments, a scale too coarse for the controller's ``p_max``, or an existing file
+        whose grid, steps, rate or scale differ from the requested ones.
+    """
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    for name, value in (('n_trials', n_trials), ('batch_size', batch_size), ('workers', workers)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+            raise ValueError(f'expected {name} to be an int >= 1, got {value!r}')
+    start = _coerce_point(start)
+    params = PidIlcParams() if controller_params is None else controller_params
+    if not isinstance(params, PidIlcParams):
+        raise ValueError(
+            f'expected controller_params to be a PidIlcParams, got {type(params).__name__}'
+        )
+    steps, rate_hz = int(params.memory_steps), float(params.rate_hz)
+    if max(params.p_max) > _CODE_MAX * float(scale):
+        raise ValueError(
+            f'expected scale >= {max(params.p_max) / _CODE_MAX:.3f} Pa per LSB to store the'
+            f' controller p_max of {max(params.p_max):.0f} Pa, got {scale!r}'
+        )
+    path = Path(path)
+    if path.exists() and not overwrite:
+        db = KnowledgeDatabase.open(path, mode='r+')
+        found = (db.grid, db.steps, db.rate_hz, db.scale)
+        if found != (grid, steps, rate_hz, float(scale)):
+            db.close()
+            raise ValueError(
+                f'expected existing {str(path)!r} to hold (grid, steps, rate_hz, scale) ='
+                f' {(grid, steps, rate_hz, float(scale))} to resume, got {found}'
+                ' (pass overwrite=True to rebuild)'
+            )
+    else:
+        db = KnowledgeDatabase.create(path, grid, steps, rate_hz, scale, overwrite=True)
+    todo = np.flatnonzero(db._mask == 0)
+    batches = [todo[i : i + batch_size] for i in range(0, len(todo), batch_size)]
+    job = _BuildJob(path, grid, start, int(n_trials), plant_params, params)
+
+    from tqdm import tqdm
+
+    def bar() -> tqdm:
+        return tqdm(total=len(todo), unit='pt', desc='knowledge points', disable=not progress)
+
+    if workers == 1 or len(batches) < 2:
+        with bar() as shown:
+            for index in batches:
+                db.write(index, _learn(job, index))
+                shown.update(len(index))
+    else:
+        import multiprocessing
+
+        db.flush()
+        # Fork the pool before tqdm starts its monitor thread.
+        pool = multiprocessing.get_context('fork').Pool(
+            min(workers, len(batches)), _worker_init, (job,)
+        )
+        with pool, bar() as shown:
+            for done in pool.imap_unordered(_worker_batch, batches):
+                shown.update(done)
+    db.flush()
+    return db
+
+
+def encode_pressure(pressure: npt.ArrayLike, scale: float) -> npt.NDArray[np.uint16]:
+    """
+    Pressures to uint16 codes: ``clip(round(p / scale), 0, 65535)``.
+
+    Parameters
+    ----------
+    pressure : array-like, any shape
+        Pressures [Pa], finite.
+    scale : float
+        Pa per LSB, > 0.
+
+    Returns
+    -------
+    ndarray of uint16, same shape
+    """
+    codes = np.rint(np.asarray(pressure, dtype=float) / scale)
+    return np.clip(codes, 0, _CODE_MAX).astype(np.uint16)
+
+
+def decode_pressure(code: npt.ArrayLike, scale: float) -> npt.NDArray[np.float64]:
+    """
+    Codes to pressures: ``code * scale`` [Pa].
+
+    Parameters
+    ----------
+    code : array-like of int, any shape
+        Stored codes.
+    scale : float
+        Pa per LSB, > 0.
+
+    Returns
+    -------
+    ndarray of float64, same shape
+    """
+    return np.asarray(code, dtype=np.uint16) * float(scale)
+
+
+def _layout(grid: KnowledgeGrid, steps: int) -> tuple[int, int, int]:
+    # (mask offset, data offset, file size) in bytes.
+    mask_bytes = -(-grid.size // _MASK_ALIGN) * _MASK_ALIGN
+    data_offset = _HEADER_SIZE + mask_bytes
+    return _HEADER_SIZE, data_offset, data_offset + grid.size * steps * N_CHAMBERS * 2
+
+
+def _is_single_point(point: npt.ArrayLike) -> bool:
+    # Cheap checks first: np.ndim converts a tuple to an array (~1 us).
+    if isinstance(point, np.ndarray):
+        return point.ndim == 1
+    if isinstance(point, tuple | list) and point:
+        return not isinstance(point[0], tuple | list | np.ndarray)
+    return np.ndim(point) == 1
+
+
+def _coerce_point(point: npt.ArrayLike) -> tuple[float, float, float]:
+    # Fast path for tuples, lists and (3,) arrays; everything else goes through numpy.
+    if isinstance(point, np.ndarray):
+        point = point.tolist() if point.shape == (3,) else point
+    if isinstance(point, tuple | list) and len(point) == 3:
+        try:
+            x, y, z = point
+            x, y, z = float(x), float(y), float(z)
+        except (TypeError, ValueError):
+            pass
+        else:
+            if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+                return x, y, z
+            raise ValueError(f'expected point of 3 finite values [m], got {point!r}')
+    arr = np.asarray(point, dtype=float)
+    if arr.shape != (3,):
+        raise ValueError(f'expected point of shape (3,) [m], got shape {arr.shape}')
+    return _coerce_point(arr.tolist())
+
+
+def _coerce_points(points: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
+    arr = np.asarray(points, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f'expected {name} of shape (3,) or (N, 3) [m], got shape {arr.shape}')
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f'expected finite {name} [m], got NaN or inf')
+    return arr
+
+
+def _coerce_indices(index: npt.ArrayLike, size: int) -> npt.NDArray[np.int64]:
+    idx = np.asarray(index)
+    if idx.ndim > 1 or not (idx.dtype.kind in 'iu' or (idx.size == 0 and idx.ndim == 1)):
+        raise ValueError(f'expected index as int or 1-D ints, got {index!r}')
+    idx = np.atleast_1d(idx).astype(np.int64)
+    if idx.size and (idx.min() < 0 or idx.max() >= size):
+        bad = int(idx[(idx < 0) | (idx >= size)][0])
+        raise ValueError(f'expected index in [0, {size}), got {bad}')
+    return idx

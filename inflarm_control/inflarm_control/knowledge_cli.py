@@ -1,0 +1,36 @@
+"""``inflarm-build-knowledge OUT``: build the experiential knowledge database (3.2 of 001_).
+
+Runs the learning trials against the simulated plant for every knowledge point of the 1 cm grid
+(67,200 points; about 1.5 min on two cores) and writes the memory-mapped database to OUT, which
+the pressure controller's ``knowledge_db_path`` parameter then reads. An interrupted build
+resumes where it stopped.
+"""
+
+import argparse
+import sys
+
+from inflarm_control.knowledge import build_knowledge_database
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog='inflarm-build-knowledge',
+                                     description=__doc__.splitlines()[0].split(': ', 1)[1])
+    parser.add_argument('out', help='database file to write (or resume)')
+    parser.add_argument('--trials', type=int, default=30, help='learning trials per point')
+    parser.add_argument('--workers', type=int, default=None,
+                        help='processes (default: one per core)')
+    parser.add_argument('--overwrite', action='store_true', help='start over if OUT exists')
+    args = parser.parse_args(argv)
+    try:
+        db = build_knowledge_database(args.out, n_trials=args.trials, workers=args.workers,
+                                      overwrite=args.overwrite)
+    except (OSError, ValueError) as err:
+        print(f'inflarm-build-knowledge: {err}', file=sys.stderr)
+        return 1
+    print(f'{args.out}: {db.n_filled} knowledge points')
+    db.close()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
