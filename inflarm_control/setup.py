@@ -23,6 +23,8 @@ setup(
         'console_scripts': [
             'pressure_controller = inflarm_control.nodes.pressure_controller:main',
             'trial_runner = inflarm_control.nodes.trial_runner:main',
+            'tip_path_demo = inflarm_control.nodes.tip_path_demo:main',
+            'elastostatic_ik = inflarm_control.nodes.elastostatic_ik:main',
             'inflarm-build-knowledge = inflarm_control.knowledge_cli:main',
             'inflarm-sra-experiments = inflarm_control.sra_experiments:main',
         ],

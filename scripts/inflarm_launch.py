@@ -65,8 +65,18 @@ def _yaml_value(value: object) -> str:
     return str(value)
 
 
+# The inflatable arm's geometry, stiffness and pressures, shared by the nodes that model it.
+ARM_CONFIG = (('inflarm_model', 'inflatable_arm.yaml'),)
+
 # The systems a user can launch. The first is the default.
 SYSTEMS: dict[str, tuple[NodeProcess, ...]] = {
+    'arm': (
+        NodeProcess('inflarm_model', 'robot_description', shared_params=ARM_CONFIG),
+        NodeProcess('inflarm_hw', 'arm_sim', shared_params=ARM_CONFIG),
+        NodeProcess('inflarm_estimation', 'load_estimator', shared_params=ARM_CONFIG),
+        NodeProcess('inflarm_control', 'elastostatic_ik', shared_params=ARM_CONFIG),
+        NodeProcess('inflarm_control', 'tip_path_demo'),
+    ),
     'sra': (
         NodeProcess('inflarm_hw', 'sra_sim'),
         NodeProcess('inflarm_control', 'pressure_controller',

@@ -1,0 +1,145 @@
+"""elastostatic_ik in-process: targets and trajectories to motor commands; rejections."""
+
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
+from nav_msgs.msg import Path
+import numpy as np
+import rclpy
+from rclpy.duration import Duration
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+
+from inflarm_control.nodes.elastostatic_ik import ElastostaticIk, resample
+from inflarm_model.elastostatics import spring_deflections
+from inflarm_model.kinematics import FlexibleArm
+from inflarm_model.link import MEAN_STIFFNESS
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
+from ros_harness import spin_until
+
+ARM = FlexibleArm(0.6, 0.03)
+FORCE = np.array([0.0, 10.0, -15.0])
+Q_M = [0.0, 0.6, -1.2]
+
+
+def deflected_tip(q_m, force=FORCE) -> np.ndarray:
+    return spring_deflections(ARM, q_m, force, MEAN_STIFFNESS).tip_position
+
+
+class Rig:
+    def __init__(self, executor, **overrides) -> None:
+        self.executor = executor
+        self.node = ElastostaticIk(context=executor.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in overrides.items()])
+        self.probe = rclpy.create_node('probe', context=executor.context)
+        self.commands: list[JointState] = []
+        self.probe.create_subscription(JointState, 'motor_position_command',
+                                       self.commands.append, COMMAND_QOS)
+        self.target_pub = self.probe.create_publisher(PointStamped, 'tip_target', COMMAND_QOS)
+        self.path_pub = self.probe.create_publisher(Path, 'tip_trajectory', RELIABLE_QOS)
+        self.joint_pub = self.probe.create_publisher(JointState, 'joint_states', SENSOR_QOS)
+        self.wrench_pub = self.probe.create_publisher(WrenchStamped, 'estimated_wrench',
+                                                      RELIABLE_QOS)
+        executor.add_node(self.node)
+        executor.add_node(self.probe)
+        assert spin_until(executor, lambda: self.target_pub.get_subscription_count() == 1
+                          and self.wrench_pub.get_subscription_count() == 1)
+
+    def joints(self, q_m=Q_M) -> None:
+        self.joint_pub.publish(JointState(name=['joint_1', 'joint_2', 'joint_3'],
+                                          position=list(q_m)))
+        assert spin_until(self.executor, lambda: self.node.q_m is not None)
+
+    def target(self, point, frame_id='base_link') -> None:
+        msg = PointStamped()
+        msg.header.frame_id = frame_id
+        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in point)
+        self.target_pub.publish(msg)
+
+    def idle(self, seconds: float = 0.4) -> None:
+        spin_until(self.executor, lambda: False, timeout_s=seconds)
+
+
+def test_a_target_is_reached_by_the_deflected_arm(executor):
+    rig = Rig(executor, **{'load.source': 'configured'})
+    rig.joints()
+    target = np.array([0.8, 0.2, 0.1])
+    rig.target(target)
+    assert spin_until(executor, lambda: rig.commands)
+    assert list(rig.commands[0].name) == ['joint_1', 'joint_2', 'joint_3']
+    q_m = np.array(rig.commands[0].position)
+    assert np.linalg.norm(deflected_tip(q_m) - target) < 1e-7
+    # the rigid arm would need other angles: the command compensates the deflection
+    assert np.linalg.norm(deflected_tip(q_m, np.zeros(3)) - target) > 5e-3
+
+
+def test_the_estimated_load_is_used_once_there_is_one(executor):
+    rig = Rig(executor)
+    rig.joints()
+    rig.target([0.8, 0.2, 0.1])
+    rig.idle()
+    assert rig.commands == []  # no estimated_wrench yet: rejected
+    wrench = WrenchStamped()
+    wrench.wrench.force.y, wrench.wrench.force.z = 5.0, -5.0
+    rig.wrench_pub.publish(wrench)
+    assert spin_until(executor, lambda: rig.node.estimated_force is not None)
+    rig.target([0.8, 0.2, 0.1])
+    assert spin_until(executor, lambda: rig.commands)
+    tip = deflected_tip(rig.commands[0].position, [0.0, 5.0, -5.0])
+    np.testing.assert_allclose(tip, [0.8, 0.2, 0.1], atol=1e-7)
+
+
+def test_bad_targets_are_rejected_and_the_node_keeps_going(executor):
+    rig = Rig(executor, **{'load.source': 'configured'})
+    rig.target([0.8, 0.2, 0.1])  # no joint states yet
+    rig.joints()
+    rig.target([2.0, 0.0, 0.0])  # beyond 2L
+    rig.target([0.8, 0.2, 0.1], frame_id='camera')  # wrong frame
+    rig.idle()
+    assert rig.commands == []
+    rig.target([0.8, 0.2, 0.1])
+    assert spin_until(executor, lambda: rig.commands)
+
+
+def path_msg(points, times, start) -> Path:
+    path = Path()
+    path.header.frame_id = 'base_link'
+    for point, t in zip(points, times, strict=True):
+        pose = PoseStamped()
+        pose.header.stamp = (start + Duration(seconds=float(t))).to_msg()
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (
+            float(v) for v in point)
+        path.poses.append(pose)
+    return path
+
+
+def test_a_trajectory_is_streamed_and_ends_on_its_last_point(executor):
+    rig = Rig(executor, **{'load.source': 'configured'})
+    start_q = [0.0, 0.6, -1.2]
+    rig.joints(start_q)
+    first = deflected_tip(start_q)
+    goal = first + [-0.1, 0.1, 0.05]
+    times = np.linspace(0.0, 1.0, 11)
+    points = first + np.outer(times, goal - first)
+    rig.path_pub.publish(path_msg(points, times, rig.node.get_clock().now()))
+    assert spin_until(executor, lambda: rig.node.trajectory is not None)
+    assert spin_until(executor, lambda: rig.node.trajectory is None, timeout_s=5.0)
+    rig.idle()  # the last set point is on its way
+    assert len(rig.commands) > 10
+    assert np.linalg.norm(deflected_tip(rig.commands[-1].position) - goal) < 1e-3
+
+
+def test_a_trajectory_without_increasing_stamps_is_rejected(executor):
+    rig = Rig(executor, **{'load.source': 'configured'})
+    rig.joints()
+    now = rig.node.get_clock().now()
+    rig.path_pub.publish(path_msg([[0.8, 0.0, 0.0], [0.8, 0.1, 0.0]], [0.0, 0.0], now))
+    rig.idle()
+    assert rig.node.trajectory is None and rig.commands == []
+
+
+def test_resample_keeps_the_waypoints_and_bounds_the_step():
+    times = np.array([0.0, 1.0, 1.5])
+    x_d = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0], [1.0, 2.0, 4.0]])
+    fine, x_fine = resample(times, x_d, 0.3)
+    assert np.diff(fine).max() <= 0.3 + 1e-12
+    for t, x in zip(times, x_d, strict=True):
+        np.testing.assert_allclose(x_fine[np.argmin(np.abs(fine - t))], x)

@@ -1,0 +1,108 @@
+"""load_estimator in-process: estimates from joint_states, skips bad samples, guards wrinkling."""
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PointStamped, WrenchStamped
+import numpy as np
+import rclpy
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from inflarm_estimation.nodes.load_estimator import LoadEstimator
+from inflarm_model.elastostatics import motor_torques, spring_deflections
+from inflarm_model.kinematics import FlexibleArm
+from inflarm_model.link import MEAN_STIFFNESS, wrinkling_moment
+from inflarm_msgs_json import LinkStatus, decode
+from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS
+from ros_harness import spin_until
+
+ARM = FlexibleArm(0.6, 0.03)
+FORCE = np.array([0.0, 10.0, -15.0])
+
+
+def loaded_sample(q_m, force=FORCE) -> tuple[np.ndarray, np.ndarray]:
+    """Motor angles and the torques that hold ``force`` (the forward problem)."""
+    q_k = spring_deflections(ARM, q_m, force, MEAN_STIFFNESS).q_k
+    q = FlexibleArm.assemble_q(q_m, q_k)
+    return q_k, motor_torques(ARM, q, force)
+
+
+class Rig:
+    def __init__(self, executor, **overrides) -> None:
+        self.executor = executor
+        self.node = LoadEstimator(context=executor.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in overrides.items()])
+        self.probe = rclpy.create_node('probe', context=executor.context)
+        self.out = {'wrench': [], 'springs': [], 'tip': [], 'links': [], 'diagnostics': []}
+        for topic, kind, key in (('estimated_wrench', WrenchStamped, 'wrench'),
+                                 ('spring_deflections', JointState, 'springs'),
+                                 ('estimated_tip', PointStamped, 'tip'),
+                                 ('link_status', String, 'links'),
+                                 ('diagnostics', DiagnosticArray, 'diagnostics')):
+            self.probe.create_subscription(kind, topic, self.out[key].append, RELIABLE_QOS)
+        self.pub = self.probe.create_publisher(JointState, 'joint_states', SENSOR_QOS)
+        executor.add_node(self.node)
+        executor.add_node(self.probe)
+        assert spin_until(executor, lambda: self.pub.get_subscription_count() == 1)
+
+    def send(self, names, positions, efforts) -> None:
+        self.pub.publish(JointState(name=names, position=list(positions),
+                                    effort=list(efforts)))
+
+
+def test_a_sample_yields_load_deflections_tip_and_link_status(executor):
+    rig = Rig(executor)
+    q_m = np.array([0.2, 0.5, -1.1])
+    q_k, tau_m = loaded_sample(q_m)
+    # extra joints and any order are fine
+    rig.send(['gripper', 'joint_3', 'joint_1', 'joint_2'], [0.0, q_m[2], q_m[0], q_m[1]],
+             [0.0, tau_m[2], tau_m[0], tau_m[1]])
+    assert spin_until(executor, lambda: len(rig.out['links']) == 2 and rig.out['tip'])
+    force = rig.out['wrench'][0].wrench.force
+    np.testing.assert_allclose([force.x, force.y, force.z], FORCE, atol=1e-6)
+    np.testing.assert_allclose(rig.out['springs'][0].position, q_k, atol=1e-9)
+    tip = rig.out['tip'][0].point
+    expected_tip = ARM.fk(FlexibleArm.assemble_q(q_m, q_k))[:3, 3]
+    np.testing.assert_allclose([tip.x, tip.y, tip.z], expected_tip, atol=1e-9)
+    statuses = [decode(m.data, expected=LinkStatus) for m in rig.out['links']]
+    assert [s.link for s in statuses] == ['link_1', 'link_2']
+    assert statuses[0].wrinkling_moment == wrinkling_moment(50e3, 0.055)
+    assert statuses[0].moment > statuses[1].moment > 0.0  # link 1 carries the longer lever
+    assert rig.out['diagnostics'][-1].status[0].level == DiagnosticStatus.OK
+
+
+def test_bad_samples_are_skipped_and_the_node_keeps_going(executor):
+    rig = Rig(executor)
+    q_m = np.array([0.2, 0.5, -1.1])
+    _, tau_m = loaded_sample(q_m)
+    names = ['joint_1', 'joint_2', 'joint_3']
+    rig.send(names[:2], q_m[:2], tau_m[:2])  # a motor missing
+    rig.send(names, q_m, [])  # no efforts
+    rig.send(names, [np.nan, 0.5, -1.1], tau_m)  # NaN
+    spin_until(executor, lambda: False, timeout_s=0.5)
+    assert rig.out['wrench'] == [] and rig.out['diagnostics'] == []
+    rig.send(names, q_m, tau_m)
+    assert spin_until(executor, lambda: rig.out['wrench'])
+
+
+def test_a_singular_configuration_is_reported_not_estimated(executor):
+    rig = Rig(executor)
+    # joint_2 = pi/2 with joint_3 = 0: the arm stands along joint 1's axis, J_m loses rank
+    rig.send(['joint_1', 'joint_2', 'joint_3'], [0.0, np.pi / 2, 0.0], [0.1, 0.2, 0.3])
+    assert spin_until(executor, lambda: rig.out['diagnostics'])
+    status = rig.out['diagnostics'][0].status[0]
+    assert status.level == DiagnosticStatus.ERROR
+    assert status.message  # the reason
+    spin_until(executor, lambda: False, timeout_s=0.3)
+    assert rig.out['wrench'] == []
+
+
+def test_low_pressure_shows_a_negative_margin(executor):
+    rig = Rig(executor, **{'arm.link_pressure_pa': [10e3, 10e3]})
+    q_m = np.array([0.0, 0.3, -0.6])
+    _, tau_m = loaded_sample(q_m)
+    rig.send(['joint_1', 'joint_2', 'joint_3'], q_m, tau_m)
+    assert spin_until(executor, lambda: len(rig.out['links']) == 2)
+    link_1 = decode(rig.out['links'][0].data, expected=LinkStatus)
+    assert link_1.moment > link_1.wrinkling_moment  # 18 N at ~1 m on a 10 kPa link
+    assert link_1.margin < 0.0
