@@ -68,21 +68,23 @@ def _yaml_value(value: object) -> str:
 # The inflatable arm's geometry, stiffness and pressures, shared by the nodes that model it.
 ARM_CONFIG = (('inflarm_model', 'inflatable_arm.yaml'),)
 
-# The systems a user can launch. The first is the default.
+# The systems a user can launch.
+INFLATABLE_ARM = (
+    NodeProcess('inflarm_model', 'robot_description', shared_params=ARM_CONFIG),
+    NodeProcess('inflarm_hw', 'arm_sim', shared_params=ARM_CONFIG),
+    NodeProcess('inflarm_estimation', 'load_estimator', shared_params=ARM_CONFIG),
+    NodeProcess('inflarm_control', 'elastostatic_ik', shared_params=ARM_CONFIG),
+    NodeProcess('inflarm_control', 'tip_path_demo'),
+)
+SOFT_ARM = (
+    NodeProcess('inflarm_hw', 'sra_sim'),
+    NodeProcess('inflarm_control', 'pressure_controller', parameters={'trial_duration_s': 10.0}),
+    NodeProcess('inflarm_control', 'trial_runner'),
+)
 SYSTEMS: dict[str, tuple[NodeProcess, ...]] = {
-    'arm': (
-        NodeProcess('inflarm_model', 'robot_description', shared_params=ARM_CONFIG),
-        NodeProcess('inflarm_hw', 'arm_sim', shared_params=ARM_CONFIG),
-        NodeProcess('inflarm_estimation', 'load_estimator', shared_params=ARM_CONFIG),
-        NodeProcess('inflarm_control', 'elastostatic_ik', shared_params=ARM_CONFIG),
-        NodeProcess('inflarm_control', 'tip_path_demo'),
-    ),
-    'sra': (
-        NodeProcess('inflarm_hw', 'sra_sim'),
-        NodeProcess('inflarm_control', 'pressure_controller',
-                    parameters={'trial_duration_s': 10.0}),
-        NodeProcess('inflarm_control', 'trial_runner'),
-    ),
+    'sim': INFLATABLE_ARM + SOFT_ARM,  # the default: both simulated arms
+    'arm': INFLATABLE_ARM,
+    'sra': SOFT_ARM,
     'smoke': (
         NodeProcess('inflarm_hw', 'demo_joint_publisher'),
         NodeProcess('inflarm_hw', 'joint_state_monitor'),

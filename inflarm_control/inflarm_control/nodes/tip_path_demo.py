@@ -48,6 +48,8 @@ class TipPathDemo(Node):
             raise ValueError(f'start and goal must be 3 finite numbers, got {self.ends}')
         self.traverse = 0
         self.path_start: float | None = None  # monotonic time the current path began
+        self.path_ends = self.ends
+        self.tip: np.ndarray | None = None
         self.errors: list[float] = []
         self.path_pub = self.create_publisher(Path, 'tip_trajectory', RELIABLE_QOS)
         self.create_subscription(PointStamped, 'tip_position_truth', self.on_truth, SENSOR_QOS)
@@ -56,7 +58,7 @@ class TipPathDemo(Node):
 
     def reference(self, elapsed: float) -> np.ndarray:
         """Where the tip should be ``elapsed`` seconds into the current traverse."""
-        a, b = self.ends if self.traverse % 2 == 0 else self.ends[::-1]
+        a, b = self.path_ends
         s = min(max(elapsed / self.params['duration_s'], 0.0), 1.0)
         return a + s * (b - a)
 
@@ -68,6 +70,11 @@ class TipPathDemo(Node):
             self.path_start = None
             return
         p = self.params
+        # The first path starts where the tip is; then back and forth between the ends.
+        if self.traverse == 0 and self.tip is not None:
+            self.path_ends = (self.tip, self.ends[1])
+        else:
+            self.path_ends = self.ends if self.traverse % 2 == 0 else self.ends[::-1]
         now = self.get_clock().now()
         path = Path()
         path.header.stamp = now.to_msg()
@@ -85,9 +92,10 @@ class TipPathDemo(Node):
         self.errors = []
 
     def on_truth(self, msg: PointStamped) -> None:
+        tip = np.array([msg.point.x, msg.point.y, msg.point.z])
+        self.tip = tip
         if self.path_start is None:
             return
-        tip = np.array([msg.point.x, msg.point.y, msg.point.z])
         self.errors.append(float(np.linalg.norm(
             tip - self.reference(time.monotonic() - self.path_start))))
 
