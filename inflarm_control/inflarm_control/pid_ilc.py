@@ -43,6 +43,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from inflarm_control.trial_metrics import TrialMetrics
 from inflarm_model.soft_arm import (
     BELLOWS_PUSH,
     CHAMBERS,
@@ -636,18 +637,15 @@ def run_trials(
     for t in range(n_trials):
         plant.reset(end_point=start)
         controller.start_trial(start, target, memory, initial_output=plant.chamber_pressures)
-        squared = np.zeros((n, 3))
-        last_outside = np.full((n, 3), -1)
+        metrics = TrialMetrics(target, tolerance)
         for k in range(steps + 1):
             y = plant.measure()
             if trajectories is not None:
                 trajectories[t, k] = y
-            error = y - target
-            squared += error * error
-            last_outside[np.abs(error) > tolerance] = k
+            metrics.add(y, times[k])
             if k < steps:
                 plant.step(controller.step(y, dt), dt)
         memory = controller.finish_trial()
-        rmse[t] = np.sqrt(squared / (steps + 1))
-        reach[t] = np.where(last_outside == steps, np.inf, (last_outside + 1) * dt)
+        rmse[t] = metrics.rmse
+        reach[t] = metrics.reach_time
     return TrialResults(times, trajectories, rmse, reach, memory, float(tolerance))
