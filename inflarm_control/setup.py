@@ -27,6 +27,7 @@ setup(
             'elastostatic_ik = inflarm_control.nodes.elastostatic_ik:main',
             'inflarm-build-knowledge = inflarm_control.knowledge_cli:main',
             'inflarm-sra-experiments = inflarm_control.sra_experiments:main',
+            'inflarm-ik-figures = inflarm_control.ik_figures:main',
         ],
     },
 )

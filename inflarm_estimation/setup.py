@@ -22,6 +22,7 @@ setup(
     entry_points={
         'console_scripts': [
             'load_estimator = inflarm_estimation.nodes.load_estimator:main',
+            'inflarm-estimate-bag = inflarm_estimation.bag_estimate:main',
         ],
     },
 )

@@ -1,0 +1,752 @@
+"""Elastostatic inverse kinematics of the inflatable-link arm (section 2.4, Fig. 6, eqs 8-9).
+
+With the tip load f (known, constant) and the spring stiffness k, the motor angles q_m are
+chosen so that the *deflected* tip, q_k solved from the equilibrium k q_k = U_k^T f
+(``inflarm_model.elastostatics``, same sign convention), reaches the target. Pure numpy and
+Pinocchio, no ROS.
+
+Velocity map. Only the tip position is controlled and a pure force meets only the linear rows
+U (3x7) of the Jacobian, so the paper's right pseudo-inverse (eq. 8) is taken of U::
+
+    U^# = U^T (U U^T)^-1                (7x3),   J_m^# = U_m^T (U U^T)^-1   (3x3)
+
+J_m^# is the 3 motor rows of U^# (eq. 9's "motor-associated rows"). It treats the springs as
+free joints sharing the motion with the motors; in fact they follow the motors through the
+equilibrium, dq_k/dq_m = (K - H_kk)^-1 H_km (H: the load Hessian), so the exact map from motor
+rates to tip velocity is the effective Jacobian
+
+    J_eff = U_m + U_k (K - H_kk)^-1 H_km     (3x3).
+
+``track_trajectory`` integrates eq. (9), dq_m/dt = J^# (v_d + K e), with either map
+(``method='paper'``: J_m^#; ``'effective'``: J_eff^-1, which feeds the desired velocity
+forward exactly). ``solve_ik`` reaches a point target by damped Newton steps on J_eff (quadratic
+convergence, to 1e-10 m by default).
+
+Unreachable targets (beyond the reach 2L, too close to the base, on the first joint's axis) and
+singular or non-converging solves raise ValueError with the reason; no silently wrong numbers.
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from inflarm_model.elastostatics import (  # the private helpers are the shared hot path
+    MOTOR_INDICES,
+    SPRING_INDICES,
+    _cholesky_solve4,
+    _load_hessian_blocks,
+    _solve_springs,
+    arm_kernel,
+    check_stiffness,
+    link_moments,
+)
+from inflarm_model.link import (
+    TESTED_PRESSURES,
+    lowest_sufficient_pressure,
+    min_pressure_for_moment,
+)
+
+__all__ = [
+    'DEFAULT_MAX_CONDITION',
+    'DEFAULT_MIN_AXIS_DISTANCE',
+    'DEFAULT_MIN_REACH',
+    'DEFAULT_TOLERANCE',
+    'PressureRequirement',
+    'TrackingResult',
+    'effective_jacobian',
+    'minimum_pressure_along',
+    'motor_pseudo_inverse',
+    'solve_ik',
+    'solve_rigid_ik',
+    'straight_line_trajectory',
+    'track_trajectory',
+]
+
+DEFAULT_TOLERANCE = 1e-10  # tip position error [m]
+DEFAULT_MAX_CONDITION = 1e6  # of the 3x3 tip Jacobian used for the step
+# Targets closer to the base than this fold the two links onto each other (radius 55 mm) and
+# approach the folded-elbow singularity [m].
+DEFAULT_MIN_REACH = 0.1
+# Targets this close to the first joint's axis leave the base yaw undetermined [m].
+DEFAULT_MIN_AXIS_DISTANCE = 1e-3
+_MAX_STEP = 0.2  # largest motor correction per Newton iteration [rad]
+_MAX_HALVINGS = 20
+_SPRING_TOL = 1e-11  # equilibrium residual for the inner spring solves [N·m]
+_SPRING_ITERATIONS = 50
+
+
+# --- validation ------------------------------------------------------------------------------
+
+
+def _vector(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
+    try:
+        v = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f'expected {name} of shape ({n},) [{unit}], got {x!r}') from None
+    if v.shape != (n,):
+        raise ValueError(f'expected {name} of shape ({n},) [{unit}], got shape {v.shape}')
+    if not np.isfinite(v).all():
+        raise ValueError(f'expected {name} to be finite [{unit}], got {v}')
+    return v
+
+
+def _rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
+    try:
+        V = np.asarray(X, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got {X!r}') from None
+    if V.ndim != 2 or V.shape[1] != n:
+        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got shape {V.shape}')
+    if not np.isfinite(V).all():
+        raise ValueError(f'expected {name} to be finite [{unit}], got non-finite entries')
+    return V
+
+
+def _link_length(arm: object) -> float:
+    L = getattr(arm, 'link_length', None)
+    if not (isinstance(L, float) and math.isfinite(L) and L > 0.0):
+        raise ValueError(f'expected an arm with a positive link_length [m], got '
+                         f'{type(arm).__name__}')
+    return L
+
+
+def _check_target(target: npt.NDArray[np.float64], reach: float, min_reach: float,
+                  min_axis_distance: float) -> None:
+    """Raise ValueError naming why ``target`` cannot be reached."""
+    distance = float(np.linalg.norm(target))
+    if distance > reach:
+        raise ValueError(f'target {target.tolist()} is beyond the reach of the arm: '
+                         f'|target| = {distance:.6g} m > 2L = {reach:.6g} m')
+    if distance < min_reach:
+        raise ValueError(f'target {target.tolist()} is too close to the base: |target| = '
+                         f'{distance:.6g} m < min_reach = {min_reach:.6g} m (folded links, '
+                         'singular elbow)')
+    if math.hypot(target[0], target[1]) < min_axis_distance:
+        raise ValueError(f'target {target.tolist()} is on the first joint axis (within '
+                         f'{min_axis_distance:.3g} m): singular, the base yaw is undetermined')
+
+
+# --- rigid arm (Table 1) ---------------------------------------------------------------------
+
+
+def _rigid_candidates(target: npt.NDArray[np.float64], L: float) -> list[tuple[float, ...]]:
+    """The (up to) four closed-form solutions of Table 1: shoulder front/back x elbow up/down.
+
+    Tip of Table 1: (r cos q1, r sin q1, z), r = L cos q2 + L cos(q2 + q3),
+    z = L sin q2 + L sin(q2 + q3).
+    """
+    x, y, z = target.tolist()
+    rho = math.hypot(x, y)
+    yaw = math.atan2(y, x)
+    out = []
+    for q1, r in ((yaw, rho), (yaw + math.pi, -rho)):
+        c3 = max(-1.0, min(1.0, (r * r + z * z - 2.0 * L * L) / (2.0 * L * L)))
+        for q3 in (math.acos(c3), -math.acos(c3)):
+            q2 = math.atan2(z, r) - math.atan2(math.sin(q3), 1.0 + math.cos(q3))
+            out.append((q1, q2, q3))
+    return out
+
+
+def _nearest(candidates: Sequence[tuple[float, ...]], q0: npt.NDArray[np.float64]):
+    """The candidate closest to q0 (angles wrapped), unwrapped next to q0."""
+    best, best_d = None, math.inf
+    for c in candidates:
+        c = np.asarray(c)
+        c = c + 2.0 * math.pi * np.round((q0 - c) / (2.0 * math.pi))
+        d = float(np.abs(c - q0).max())
+        if d < best_d:
+            best, best_d = c, d
+    return best
+
+
+def solve_rigid_ik(
+    rigid_arm: object,
+    target: npt.ArrayLike,
+    q_m0: npt.ArrayLike,
+    *,
+    min_reach: float = DEFAULT_MIN_REACH,
+    min_axis_distance: float = DEFAULT_MIN_AXIS_DISTANCE,
+) -> npt.NDArray[np.float64]:
+    """Rigid-arm inverse kinematics (Table 1 of 000_ce37cf035a0a87c6), the baseline of Fig. 11.
+
+    Closed form: of the four solutions (shoulder front/back, elbow up/down) the one nearest
+    ``q_m0`` is returned, unwrapped next to it (continuous along a trajectory).
+
+    Parameters
+    ----------
+    rigid_arm : RigidArm
+        The 3-DOF rigid arm (two links of length ``link_length``).
+    target : array-like, shape (3,)
+        Tip position [m], base frame.
+    q_m0 : array-like, shape (3,)
+        Reference motor angles [rad] picking the branch.
+    min_reach, min_axis_distance : float, optional
+        See ``solve_ik``.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Motor angles [rad] putting the rigid tip on ``target``.
+
+    Raises
+    ------
+    ValueError
+        On invalid arguments or a target beyond 2L, closer than ``min_reach`` or on the first
+        joint's axis.
+    """
+    L = _link_length(rigid_arm)
+    x = _vector('target', target, 3, 'm')
+    q0 = _vector('q_m0', q_m0, 3, 'rad')
+    _check_target(x, 2.0 * L, min_reach, min_axis_distance)
+    return _nearest(_rigid_candidates(x, L), q0)
+
+
+# --- the flexible arm ------------------------------------------------------------------------
+
+
+def _load_hessian(J: npt.NDArray[np.float64], f: npt.NDArray[np.float64]):
+    """H_ab = z_a . (u_b x f), a <= b, symmetric (see inflarm_model.elastostatics)."""
+    skew = np.array([[0.0, -f[2], f[1]], [f[2], 0.0, -f[0]], [-f[1], f[0], 0.0]])
+    M = (skew @ J[3:]).T @ J[:3]
+    return np.triu(M) + np.triu(M, 1).T
+
+
+def _effective(J, f, k):
+    U = J[:3]
+    H = _load_hessian(J, f)
+    stiff = np.diag(k) - H[np.ix_(SPRING_INDICES, SPRING_INDICES)]
+    follow = np.linalg.solve(stiff, H[np.ix_(SPRING_INDICES, MOTOR_INDICES)])  # dq_k/dq_m
+    return U[:, MOTOR_INDICES] + U[:, SPRING_INDICES] @ follow
+
+
+def _paper_inverse(J):
+    U = J[:3]
+    return U[:, MOTOR_INDICES].T @ np.linalg.inv(U @ U.T)
+
+
+def effective_jacobian(
+    arm: object, q: npt.ArrayLike, force: npt.ArrayLike, stiffness: npt.ArrayLike
+) -> npt.NDArray[np.float64]:
+    """Tip velocity per motor rate with the springs in equilibrium, J_eff (3x3).
+
+    ``J_eff = U_m + U_k (K - H_kk)^-1 H_km``: the motors move the tip directly (U_m) and
+    through the deflections they induce, dq_k/dq_m = (K - H_kk)^-1 H_km (derivative of
+    k q_k = U_k^T f at constant f, eq. 7 of 000_ce37cf035a0a87c6).
+
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    q : array-like, shape (7,)
+        Joint angles [rad], DH order, at equilibrium.
+    force : array-like, shape (3,)
+        Tip force [N], base frame.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad].
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        d p_e / d q_m [m/rad], base frame.
+
+    Raises
+    ------
+    ValueError
+        On invalid arguments.
+    """
+    q = _vector('q', q, 7, 'rad')
+    f = _vector('force', force, 3, 'N')
+    k = np.array(check_stiffness(stiffness))
+    return _effective(arm.jacobian(q), f, k)
+
+
+def motor_pseudo_inverse(arm: object, q: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Motor rows of the right pseudo-inverse of the linear Jacobian, eqs (8)-(9).
+
+    ``J_m^# = U_m^T (U U^T)^-1`` with U the 3x7 linear block of the Jacobian of eq. (4): the
+    motor rows of U^# = U^T (U U^T)^-1, the position-only form of eq. (8).
+
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    q : array-like, shape (7,)
+        Joint angles [rad], DH order.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        Motor rates per tip velocity [rad/m].
+
+    Raises
+    ------
+    ValueError
+        On invalid arguments.
+    """
+    return _paper_inverse(arm.jacobian(_vector('q', q, 7, 'rad')))
+
+
+def _effective_flat(j, f0, f1, f2, k0, k1, k2, k3):
+    """J_eff = U_m + U_k (K - H_kk)^-1 H_km from the flat Jacobian, rows as 3 tuples."""
+    h_mk, (h22, h23, h25, h26, h33, h35, h36, h55, h56, h66) = _load_hessian_blocks(
+        j, f0, f1, f2)
+    a = (k0 - h22, -h23, -h25, -h26, k1 - h33, -h35, -h36, k2 - h55, -h56, k3 - h66)
+    rows = ([], [], [])
+    for i, m in enumerate(MOTOR_INDICES):
+        x0, x1, x2, x3, _ = _cholesky_solve4(*a, *h_mk[4 * i:4 * i + 4])  # dq_k / dq_m_i
+        for r in range(3):
+            o = 7 * r
+            rows[r].append(j[o + m] + j[o + 2] * x0 + j[o + 3] * x1 + j[o + 5] * x2
+                           + j[o + 6] * x3)
+    return rows
+
+
+def _solve3(rows, w0, w1, w2):
+    """Solve the 3x3 system (rows) x = w by the adjugate.
+
+    Returns ``(x0, x1, x2, ratio)``, ratio = |det| / (|row 0| |row 1| |row 2|) in [0, 1]
+    (Hadamard), a scale-free singularity measure.
+    """
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = rows
+    bc0, bc1, bc2 = b1 * c2 - b2 * c1, b2 * c0 - b0 * c2, b0 * c1 - b1 * c0
+    ca0, ca1, ca2 = c1 * a2 - c2 * a1, c2 * a0 - c0 * a2, c0 * a1 - c1 * a0
+    ab0, ab1, ab2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    det = a0 * bc0 + a1 * bc1 + a2 * bc2
+    norms = math.sqrt((a0 * a0 + a1 * a1 + a2 * a2) * (b0 * b0 + b1 * b1 + b2 * b2)
+                      * (c0 * c0 + c1 * c1 + c2 * c2))
+    ratio = abs(det) / norms if norms > 0.0 else 0.0
+    if det == 0.0:
+        return math.nan, math.nan, math.nan, 0.0
+    s = 1.0 / det
+    return ((bc0 * w0 + ca0 * w1 + ab0 * w2) * s, (bc1 * w0 + ca1 * w1 + ab1 * w2) * s,
+            (bc2 * w0 + ca2 * w1 + ab2 * w2) * s, ratio)
+
+
+def _paper_step(j, w0, w1, w2):
+    """J_m^# w = U_m^T (U U^T)^-1 w, eq. (9) with the motor rows of eq. (8)."""
+    ux, uy, uz = j[0:7], j[7:14], j[14:21]
+    sxx = sum(a * a for a in ux)
+    syy = sum(a * a for a in uy)
+    szz = sum(a * a for a in uz)
+    sxy = sum(a * b for a, b in zip(ux, uy, strict=True))
+    sxz = sum(a * b for a, b in zip(ux, uz, strict=True))
+    syz = sum(a * b for a, b in zip(uy, uz, strict=True))
+    y0, y1, y2, ratio = _solve3(((sxx, sxy, sxz), (sxy, syy, syz), (sxz, syz, szz)), w0, w1, w2)
+    return tuple(ux[m] * y0 + uy[m] * y1 + uz[m] * y2 for m in MOTOR_INDICES), ratio
+
+
+# Below this Hadamard ratio of the 3x3 map (|det| over the product of its row norms, scale-free,
+# at least 1/cond^2) track_trajectory treats the configuration as singular.
+_MIN_RATIO = 1e-9
+
+
+class _Springs:
+    """Warm-started spring equilibria of one arm under a constant load."""
+
+    def __init__(self, arm: object, force: npt.NDArray[np.float64], k: tuple[float, ...]):
+        self.kernel = arm_kernel(arm)
+        self.f = tuple(force.tolist())
+        self.k = k
+        self.q_k = (0.0, 0.0, 0.0, 0.0)
+
+    def solve(self, m0: float, m1: float, m2: float):
+        """Equilibrium at these motor angles: ``(q (7-tuple), flat Jacobian, tip (3-list))``.
+
+        Raises ValueError when it fails.
+        """
+        q0, q1, q2, q3, j, iterations, residual, status = _solve_springs(
+            self.kernel, m0, m1, m2, *self.f, *self.k, *self.q_k, _SPRING_TOL,
+            _SPRING_ITERATIONS)
+        if status != 'converged':
+            raise ValueError(f'spring equilibrium at q_m = {[m0, m1, m2]} failed ({status}, '
+                             f'residual {residual:.3g} N·m after {iterations} iterations)')
+        self.q_k = (q0, q1, q2, q3)
+        return (m0, m1, q0, q1, m2, q2, q3), j, self.kernel.tip_position()
+
+
+def solve_ik(
+    arm: object,
+    target: npt.ArrayLike,
+    force: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
+    q_m0: npt.ArrayLike,
+    *,
+    tol: float = DEFAULT_TOLERANCE,
+    max_iterations: int = 50,
+    max_condition: float = DEFAULT_MAX_CONDITION,
+    min_reach: float = DEFAULT_MIN_REACH,
+    min_axis_distance: float = DEFAULT_MIN_AXIS_DISTANCE,
+) -> npt.NDArray[np.float64]:
+    """Motor angles whose deflected tip reaches ``target`` under the load, section 2.4.
+
+    Starts from the rigid solution (Table 1 geometry, the branch nearest ``q_m0``), or from
+    ``q_m0`` itself when its deflected tip is closer, and takes damped Newton steps
+    dq_m = J_eff^-1 (target - p_e), re-solving the spring equilibrium of eq. (7) at every
+    iterate (warm-started), until the deflected tip is within ``tol``.
+
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    target : array-like, shape (3,)
+        Desired tip position x_d [m], base frame.
+    force : array-like, shape (3,)
+        Tip force f_e [N], base frame, known and constant.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad], shared or per spring.
+    q_m0 : array-like, shape (3,)
+        Start / reference motor angles [rad] picking the branch (shoulder, elbow).
+    tol : float, optional
+        Tip position tolerance [m], positive.
+    max_iterations : int, optional
+        Newton iterations allowed.
+    max_condition : float, optional
+        Largest accepted condition number of J_eff; above it the configuration is singular.
+    min_reach : float, optional
+        Smallest accepted |target| [m].
+    min_axis_distance : float, optional
+        Smallest accepted distance of the target from the first joint's axis [m].
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Motor angles q_m [rad], DH joints 1, 2, 5.
+
+    Raises
+    ------
+    ValueError
+        On invalid arguments; a target beyond 2L, closer than ``min_reach`` or on the first
+        joint's axis; a singular configuration (condition number of J_eff over
+        ``max_condition``); a spring equilibrium that fails; or no convergence (the target is
+        then outside the workspace of the deflected arm).
+    """
+    L = _link_length(arm)
+    x_d = _vector('target', target, 3, 'm')
+    f = _vector('force', force, 3, 'N')
+    k = check_stiffness(stiffness)
+    q0 = _vector('q_m0', q_m0, 3, 'rad')
+    tol = float(tol)
+    if not (math.isfinite(tol) and tol > 0.0):
+        raise ValueError(f'expected tol positive and finite [m], got {tol!r}')
+    _check_target(x_d, 2.0 * L, min_reach, min_axis_distance)
+    springs = _Springs(arm, f, k)
+    f0, f1, f2 = f.tolist()
+    x0, x1, x2 = x_d.tolist()
+
+    # Start from the rigid solution nearest q_m0, or from q_m0 itself when its deflected tip
+    # is closer (a warm start along a trajectory).
+    best = None
+    for start in (_nearest(_rigid_candidates(x_d, L), q0), q0):
+        m0, m1, m2 = start.tolist()
+        _, j, (p0, p1, p2) = springs.solve(m0, m1, m2)
+        e0, e1, e2 = x0 - p0, x1 - p1, x2 - p2
+        norm = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if best is None or norm < best[-1]:
+            best = (m0, m1, m2, j, e0, e1, e2, norm)
+    m0, m1, m2, j, e0, e1, e2, norm = best
+    iterations = 0
+    while norm > tol and iterations < max_iterations:
+        iterations += 1
+        rows = _effective_flat(j, f0, f1, f2, *k)
+        cond = float(np.linalg.cond(rows))
+        if not cond <= max_condition:
+            raise ValueError(f'singular configuration at q_m = {[m0, m1, m2]}: condition '
+                             f'number of J_eff {cond:.3g} > max_condition {max_condition:.3g}')
+        d0, d1, d2, _ = _solve3(rows, e0, e1, e2)
+        size = max(abs(d0), abs(d1), abs(d2))
+        if size > _MAX_STEP:
+            d0, d1, d2 = d0 * _MAX_STEP / size, d1 * _MAX_STEP / size, d2 * _MAX_STEP / size
+        alpha = 1.0
+        for _ in range(_MAX_HALVINGS):
+            t0, t1, t2 = m0 + alpha * d0, m1 + alpha * d1, m2 + alpha * d2
+            _, jt, (p0, p1, p2) = springs.solve(t0, t1, t2)
+            g0, g1, g2 = x0 - p0, x1 - p1, x2 - p2
+            trial = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+            if trial < (1.0 - 1e-4 * alpha) * norm:
+                break
+            alpha *= 0.5
+        else:
+            break
+        m0, m1, m2, j, e0, e1, e2, norm = t0, t1, t2, jt, g0, g1, g2, trial
+    if norm <= tol:
+        return np.array((m0, m1, m2))
+    raise ValueError(f'elastostatic IK did not reach target {x_d.tolist()}: tip error '
+                     f'{norm:.3g} m after {iterations} iterations; the target is likely '
+                     'outside the workspace of the deflected arm')
+
+
+# --- trajectories ----------------------------------------------------------------------------
+
+
+def straight_line_trajectory(
+    x_start: npt.ArrayLike, x_goal: npt.ArrayLike, duration: float, samples: int
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """A straight tip path with a minimum-jerk time law (zero velocity at both ends).
+
+    ``x(t) = x_start + s(t / T) (x_goal - x_start)``, ``s(u) = 10 u^3 - 15 u^4 + 6 u^5``.
+
+    Parameters
+    ----------
+    x_start, x_goal : array-like, shape (3,)
+        End points [m], base frame.
+    duration : float
+        T [s], positive.
+    samples : int
+        Number of waypoints, >= 2.
+
+    Returns
+    -------
+    times : ndarray, shape (samples,)
+        [s], from 0 to T.
+    x_d : ndarray, shape (samples, 3)
+        Positions [m].
+    v_d : ndarray, shape (samples, 3)
+        Velocities [m/s].
+
+    Raises
+    ------
+    ValueError
+        On invalid arguments.
+    """
+    a = _vector('x_start', x_start, 3, 'm')
+    b = _vector('x_goal', x_goal, 3, 'm')
+    T = float(duration)
+    if not (math.isfinite(T) and T > 0.0):
+        raise ValueError(f'expected duration positive and finite [s], got {duration!r}')
+    if int(samples) != samples or samples < 2:
+        raise ValueError(f'expected samples an integer >= 2, got {samples!r}')
+    times = np.linspace(0.0, T, int(samples))
+    u = times / T
+    s = u**3 * (10.0 - 15.0 * u + 6.0 * u * u)
+    ds = 30.0 * u**2 * (1.0 - u) ** 2 / T
+    return times, a + s[:, None] * (b - a), ds[:, None] * (b - a)
+
+
+@dataclass(frozen=True)
+class TrackingResult:
+    """Motor trajectory of the elastostatic IK along a tip trajectory (Figs 10-11).
+
+    Attributes
+    ----------
+    times : ndarray, shape (N,)
+        [s].
+    q_m : ndarray, shape (N, 3)
+        Motor angles [rad], DH joints 1, 2, 5: the set points for motor control.
+    q : ndarray, shape (N, 7)
+        Full joint angles [rad] at equilibrium (springs included), DH order.
+    tip_position : ndarray, shape (N, 3)
+        Deflected tip [m], base frame.
+    tip_error : ndarray, shape (N,)
+        |x_d - tip| [m].
+    """
+
+    times: npt.NDArray[np.float64]
+    q_m: npt.NDArray[np.float64]
+    q: npt.NDArray[np.float64]
+    tip_position: npt.NDArray[np.float64]
+    tip_error: npt.NDArray[np.float64]
+
+
+def track_trajectory(
+    arm: object,
+    times: npt.ArrayLike,
+    x_d: npt.ArrayLike,
+    v_d: npt.ArrayLike,
+    force: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
+    q_m0: npt.ArrayLike,
+    gain: npt.ArrayLike,
+    *,
+    method: str = 'paper',
+) -> TrackingResult:
+    """Integrate eq. (9), dq_m/dt = J^# (v_d + K e), along a timed tip trajectory (Fig. 6).
+
+    At each waypoint the springs are re-solved from the equilibrium (warm-started), the
+    deflected tip gives e = x_d - x_e, and an explicit Euler step to the next time stamp
+    updates the motors.
+
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    times : array-like, shape (N,)
+        Strictly increasing time stamps [s], N >= 2.
+    x_d : array-like, shape (N, 3)
+        Desired tip positions [m], base frame.
+    v_d : array-like, shape (N, 3)
+        Desired tip velocities [m/s].
+    force : array-like, shape (3,)
+        Tip force f_e [N], base frame, constant.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad].
+    q_m0 : array-like, shape (3,)
+        Motor angles at ``times[0]`` [rad].
+    gain : float or array-like, shape (3, 3)
+        K [1/s], a positive scalar or a symmetric positive definite matrix. Explicit Euler
+        needs ``dt * gain`` below about 1.
+    method : {'paper', 'effective'}, optional
+        ``'paper'``: J^# = J_m^# = U_m^T (U U^T)^-1, the motor rows of the pseudo-inverse
+        (eqs 8-9). ``'effective'``: J^# = J_eff^-1, the exact motor-to-tip map with the springs
+        in equilibrium (see ``effective_jacobian``).
+
+    Returns
+    -------
+    TrackingResult
+
+    Raises
+    ------
+    ValueError
+        On invalid arguments, a singular J^# or a failed spring equilibrium.
+    """
+    t = np.asarray(times, dtype=float)
+    if t.ndim != 1 or t.size < 2 or not np.isfinite(t).all() or not (np.diff(t) > 0.0).all():
+        raise ValueError(f'expected times strictly increasing, finite, shape (N,) with N >= 2 '
+                         f'[s], got shape {t.shape}')
+    N = t.size
+    X = _rows('x_d', x_d, 3, 'm')
+    V = _rows('v_d', v_d, 3, 'm/s')
+    if X.shape[0] != N or V.shape[0] != N:
+        raise ValueError(f'expected x_d and v_d of shape ({N}, 3) like times, got {X.shape} '
+                         f'and {V.shape}')
+    f = _vector('force', force, 3, 'N')
+    k = check_stiffness(stiffness)
+    q_m = _vector('q_m0', q_m0, 3, 'rad').copy()
+    K = _gain(gain)
+    if method not in ('paper', 'effective'):
+        raise ValueError(f"expected method 'paper' or 'effective', got {method!r}")
+    springs = _Springs(arm, f, k)
+    f0, f1, f2 = f.tolist()
+    effective = method == 'effective'
+    dt = np.diff(t).tolist()
+    X_list, V_list, K_rows = X.tolist(), V.tolist(), K.tolist()
+    (ka, kb, kc), (kd, ke, kf), (kg, kh, ki) = K_rows
+    m0, m1, m2 = q_m.tolist()
+    Q = []
+    tips = []
+    for n in range(N):
+        q, j, tip = springs.solve(m0, m1, m2)
+        Q.append(q)
+        tips.append(tip)
+        if n == N - 1:
+            break
+        (x0, x1, x2), (v0, v1, v2) = X_list[n], V_list[n]
+        e0, e1, e2 = x0 - tip[0], x1 - tip[1], x2 - tip[2]
+        w0 = v0 + ka * e0 + kb * e1 + kc * e2
+        w1 = v1 + kd * e0 + ke * e1 + kf * e2
+        w2 = v2 + kg * e0 + kh * e1 + ki * e2
+        if effective:
+            d0, d1, d2, ratio = _solve3(_effective_flat(j, f0, f1, f2, *k), w0, w1, w2)
+        else:
+            (d0, d1, d2), ratio = _paper_step(j, w0, w1, w2)
+        if not ratio >= _MIN_RATIO:
+            raise ValueError(f'singular configuration at t = {t[n]:.6g} s, q_m = '
+                             f'{[m0, m1, m2]} (Hadamard ratio {ratio:.3g})')
+        h = dt[n]
+        m0, m1, m2 = m0 + h * d0, m1 + h * d1, m2 + h * d2
+    Q = np.array(Q)
+    tips = np.array(tips)
+    return TrackingResult(t, Q[:, MOTOR_INDICES], Q, tips, np.linalg.norm(X - tips, axis=1))
+
+
+def _gain(gain: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    K = np.asarray(gain, dtype=float)
+    if K.shape == ():
+        K = float(K) * np.eye(3)
+    if K.shape != (3, 3) or not np.isfinite(K).all():
+        raise ValueError(f'expected gain as a scalar or shape (3, 3) [1/s], got {K.shape}')
+    if not np.allclose(K, K.T) or not (np.linalg.eigvalsh(K) > 0.0).all():
+        raise ValueError(f'expected gain symmetric positive definite [1/s], got {K.tolist()}')
+    return K
+
+
+# --- wrinkling along a trajectory ------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PressureRequirement:
+    """Largest link moment along a trajectory and the inflation it needs (section 4).
+
+    Attributes
+    ----------
+    moments : ndarray, shape (N, 2)
+        Bending moment on link 1 and link 2 at each waypoint [N·m].
+    max_moment : float
+        Largest of them [N·m].
+    link : int
+        Link carrying it, 1 or 2.
+    index : int
+        Waypoint where it occurs.
+    required_pressure : float
+        Lowest pressure whose wrinkling moment (eq. 3) holds it [Pa].
+    lowest_sufficient_pressure : float or None
+        Lowest of the candidate (tested) pressures that holds it [Pa]; None if none does.
+    """
+
+    moments: npt.NDArray[np.float64]
+    max_moment: float
+    link: int
+    index: int
+    required_pressure: float
+    lowest_sufficient_pressure: float | None
+
+
+def minimum_pressure_along(
+    arm: object,
+    q_trajectory: npt.ArrayLike,
+    force: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
+    radius: float,
+    pressures: npt.ArrayLike = TESTED_PRESSURES,
+) -> PressureRequirement:
+    """Largest link moment along a trajectory and the minimum inflation pressure, section 4.
+
+    The moment on a link is the combination sqrt(tau_a^2 + tau_b^2) of its two orthogonal
+    spring torques (``link_moments``); the pressure follows from M_w = (pi/4) pi p r^3 (eq. 3).
+    The paper's simulation gives 17.51 N·m on link 1 and p >= 50 kPa among 10-60 kPa.
+
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    q_trajectory : array-like, shape (N, 7) or (N, 3)
+        Full joint angles at equilibrium [rad], or motor angles only, in which case the
+        springs are solved from the equilibrium.
+    force : array-like, shape (3,)
+        Tip force [N], base frame.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad].
+    radius : float
+        Link radius r [m].
+    pressures : array-like, shape (n,), optional
+        Candidate pressures [Pa]; Table 3's 10-60 kPa by default.
+
+    Returns
+    -------
+    PressureRequirement
+
+    Raises
+    ------
+    ValueError
+        On invalid arguments or a failed spring equilibrium.
+    """
+    Qt = np.asarray(q_trajectory, dtype=float)
+    f = _vector('force', force, 3, 'N')
+    k = check_stiffness(stiffness)
+    if Qt.ndim == 2 and Qt.shape[1] == 3:
+        Qm = _rows('q_trajectory', Qt, 3, 'rad')
+        springs = _Springs(arm, f, k)
+        Qt = np.array([springs.solve(*q_m)[0] for q_m in Qm.tolist()])
+    Qt = _rows('q_trajectory', Qt, 7, 'rad')
+    if Qt.shape[0] == 0:
+        raise ValueError('expected a non-empty q_trajectory')
+    moments = link_moments(arm, Qt, f)
+    index, link = np.unravel_index(int(np.argmax(moments)), moments.shape)
+    worst = float(moments[index, link])
+    return PressureRequirement(
+        moments, worst, int(link) + 1, int(index),
+        float(min_pressure_for_moment(worst, radius)),
+        lowest_sufficient_pressure(worst, radius, pressures),
+    )

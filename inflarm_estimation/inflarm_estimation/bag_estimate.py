@@ -1,0 +1,152 @@
+"""``inflarm-estimate-bag``: the tip load and pose estimated offline from a recorded bag.
+
+Usage::
+
+    inflarm-estimate-bag BAG --out estimates.csv [--topic joint_states] [--stiffness 172.71]
+                         [--link-length 0.6] [--spring-offset 0.03]
+
+Reads every sensor_msgs/JointState on ``--topic`` of the rosbag2 bag BAG (sqlite3 or MCAP, as
+``bag_recorder`` writes), takes the positions and efforts (load torques) of joint_1..joint_3 by
+name, estimates all samples in one vectorized call (``estimate_load_and_pose_batch``, Fig. 5 of
+000_ce37cf035a0a87c6) and writes one CSV row per sample:
+
+    time_s, force_x_n, force_y_n, force_z_n, q_k1_rad .. q_k4_rad, tip_x_m, tip_y_m, tip_z_m,
+    converged
+
+``time_s`` is the sample's header stamp (the bag's record time when the stamp is zero); the
+estimates are NaN where ``converged`` is 0. Samples without the three joints, or with
+non-finite values, are skipped and counted. Prints a summary (samples, converged, mean force).
+Exit status: 0 on success, 1 on an unreadable bag or no usable sample, 2 on bad arguments.
+"""
+
+import argparse
+from collections.abc import Sequence
+import csv
+import math
+import sys
+
+import numpy as np
+
+from inflarm_estimation.elastostatic import estimate_load_and_pose_batch
+from inflarm_hw.bag import bag_info, deserialize, normalize_topic, read_messages
+from inflarm_model.kinematics import FlexibleArm
+from inflarm_model.link import MEAN_STIFFNESS
+from inflarm_model.urdf import DEFAULT_LINK_LENGTH, DEFAULT_SPRING_OFFSET
+
+PROG = 'inflarm-estimate-bag'
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+CSV_HEADER = ('time_s', 'force_x_n', 'force_y_n', 'force_z_n', 'q_k1_rad', 'q_k2_rad',
+              'q_k3_rad', 'q_k4_rad', 'tip_x_m', 'tip_y_m', 'tip_z_m', 'converged')
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f'expected a positive finite number, got {text!r}')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Command-line parser of ``inflarm-estimate-bag``."""
+    parser = argparse.ArgumentParser(
+        prog=PROG, description='Estimate the tip load and the link deflections of the '
+                               'inflatable arm from the joint states recorded in a bag.')
+    parser.add_argument('bag', help='rosbag2 directory (sqlite3 or MCAP)')
+    parser.add_argument('--out', required=True, metavar='CSV', help='CSV file to write')
+    parser.add_argument('--topic', default='joint_states',
+                        help='sensor_msgs/JointState topic (default: %(default)s)')
+    parser.add_argument('--stiffness', type=_positive_float, nargs='+', default=[MEAN_STIFFNESS],
+                        metavar='K', help='spring stiffness [N m/rad], one for all four springs '
+                                          'or four values (default: %(default)s)')
+    parser.add_argument('--link-length', type=_positive_float, default=DEFAULT_LINK_LENGTH,
+                        help='inflatable link length L [m] (default: %(default)s)')
+    parser.add_argument('--spring-offset', type=_positive_float, default=DEFAULT_SPRING_OFFSET,
+                        help='virtual spring offset l1 [m] (default: %(default)s)')
+    return parser
+
+
+def read_motor_samples(bag: str, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Times [s], motor angles (N, 3) [rad] and torques (N, 3) [N·m] on ``topic``, and the
+    number of samples skipped for missing joints or non-finite values.
+
+    Raises
+    ------
+    ValueError
+        When the bag is unreadable, or ``topic`` is not in it or not a JointState topic.
+    """
+    name = normalize_topic(topic)
+    info = bag_info(bag)
+    if name in info.topics and info.topics[name].msgtype != JOINT_STATE:
+        raise ValueError(f'{name} holds {info.topics[name].msgtype}, expected {JOINT_STATE}')
+    names = FlexibleArm.MOTOR_JOINT_NAMES
+    times, q_m, tau_m = [], [], []
+    skipped = 0
+    for message in read_messages(bag, [name]):
+        msg = deserialize(message.data, message.msgtype)
+        index = {joint: i for i, joint in enumerate(msg.name)}
+        if (any(joint not in index for joint in names) or len(msg.position) != len(msg.name)
+                or len(msg.effort) != len(msg.name)):
+            skipped += 1
+            continue
+        q = [msg.position[index[joint]] for joint in names]
+        tau = [msg.effort[index[joint]] for joint in names]
+        if not (np.isfinite(q).all() and np.isfinite(tau).all()):
+            skipped += 1
+            continue
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        times.append((stamp or message.timestamp_ns) * 1e-9)
+        q_m.append(q)
+        tau_m.append(tau)
+    return (np.array(times), np.array(q_m, dtype=float).reshape(-1, 3),
+            np.array(tau_m, dtype=float).reshape(-1, 3), skipped)
+
+
+def write_estimates_csv(path: str, times: np.ndarray, estimates) -> None:
+    """One row per sample: time, force, q_k, tip, converged (1 or 0)."""
+    with open(path, 'w', newline='', encoding='utf-8') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(CSV_HEADER)
+        for i, t in enumerate(times):
+            values = [*estimates.force[i], *estimates.q_k[i], *estimates.tip_position[i]]
+            writer.writerow([f'{t:.9f}', *(repr(float(v)) for v in values),
+                             int(estimates.converged[i])])
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the tool; returns the exit status (0 ok, 1 bad bag or no samples, 2 bad arguments)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits on --help and usage errors
+        return int(exc.code) if isinstance(exc.code, int) else 2
+    if len(args.stiffness) not in (1, 4):
+        parser.print_usage(sys.stderr)
+        print(f'{PROG}: error: --stiffness takes 1 or 4 values, got {len(args.stiffness)}',
+              file=sys.stderr)
+        return 2
+    stiffness = args.stiffness[0] if len(args.stiffness) == 1 else args.stiffness
+    try:
+        arm = FlexibleArm(args.link_length, args.spring_offset)
+        times, q_m, tau_m, skipped = read_motor_samples(args.bag, args.topic)
+        if len(times) == 0:
+            raise ValueError(f'no {args.topic} sample with positions and efforts of '
+                             f'{list(FlexibleArm.MOTOR_JOINT_NAMES)} in {args.bag} '
+                             f'({skipped} skipped)')
+        estimates = estimate_load_and_pose_batch(arm, q_m, tau_m, stiffness)
+        write_estimates_csv(args.out, times, estimates)
+    except (OSError, ValueError) as exc:
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return 1
+    converged = int(estimates.converged.sum())
+    mean = (np.mean(estimates.force[estimates.converged], axis=0) if converged
+            else np.full(3, math.nan))
+    print(f'{len(times)} samples ({skipped} skipped), {converged} converged; mean force '
+          f'[{mean[0]:.3f}, {mean[1]:.3f}, {mean[2]:.3f}] N; wrote {args.out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
