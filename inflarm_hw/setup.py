@@ -25,6 +25,8 @@ setup(
             'joint_state_monitor = inflarm_hw.nodes.joint_state_monitor:main',
             'sra_sim = inflarm_hw.nodes.sra_sim:main',
             'arm_sim = inflarm_hw.nodes.arm_sim:main',
+            'bag_recorder = inflarm_hw.nodes.bag_recorder:main',
+            'bag_player = inflarm_hw.nodes.bag_player:main',
         ],
     },
 )

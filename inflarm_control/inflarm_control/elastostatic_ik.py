@@ -40,7 +40,9 @@ from inflarm_model.elastostatics import (  # the private helpers are the shared 
     _load_hessian_blocks,
     _solve_springs,
     arm_kernel,
+    check_rows,
     check_stiffness,
+    check_vector,
     link_moments,
 )
 from inflarm_model.link import (
@@ -79,30 +81,6 @@ _SPRING_ITERATIONS = 50
 
 
 # --- validation ------------------------------------------------------------------------------
-
-
-def _vector(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
-    try:
-        v = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape ({n},) [{unit}], got {x!r}') from None
-    if v.shape != (n,):
-        raise ValueError(f'expected {name} of shape ({n},) [{unit}], got shape {v.shape}')
-    if not np.isfinite(v).all():
-        raise ValueError(f'expected {name} to be finite [{unit}], got {v}')
-    return v
-
-
-def _rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
-    try:
-        V = np.asarray(X, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got {X!r}') from None
-    if V.ndim != 2 or V.shape[1] != n:
-        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got shape {V.shape}')
-    if not np.isfinite(V).all():
-        raise ValueError(f'expected {name} to be finite [{unit}], got non-finite entries')
-    return V
 
 
 def _link_length(arm: object) -> float:
@@ -198,8 +176,8 @@ def solve_rigid_ik(
         joint's axis.
     """
     L = _link_length(rigid_arm)
-    x = _vector('target', target, 3, 'm')
-    q0 = _vector('q_m0', q_m0, 3, 'rad')
+    x = check_vector('target', target, 3, 'm')
+    q0 = check_vector('q_m0', q_m0, 3, 'rad')
     _check_target(x, 2.0 * L, min_reach, min_axis_distance)
     return _nearest(_rigid_candidates(x, L), q0)
 
@@ -257,8 +235,8 @@ def effective_jacobian(
     ValueError
         On invalid arguments.
     """
-    q = _vector('q', q, 7, 'rad')
-    f = _vector('force', force, 3, 'N')
+    q = check_vector('q', q, 7, 'rad')
+    f = check_vector('force', force, 3, 'N')
     k = np.array(check_stiffness(stiffness))
     return _effective(arm.jacobian(q), f, k)
 
@@ -286,7 +264,7 @@ def motor_pseudo_inverse(arm: object, q: npt.ArrayLike) -> npt.NDArray[np.float6
     ValueError
         On invalid arguments.
     """
-    return _paper_inverse(arm.jacobian(_vector('q', q, 7, 'rad')))
+    return _paper_inverse(arm.jacobian(check_vector('q', q, 7, 'rad')))
 
 
 def _effective_flat(j, f0, f1, f2, k0, k1, k2, k3):
@@ -424,10 +402,10 @@ def solve_ik(
         then outside the workspace of the deflected arm).
     """
     L = _link_length(arm)
-    x_d = _vector('target', target, 3, 'm')
-    f = _vector('force', force, 3, 'N')
+    x_d = check_vector('target', target, 3, 'm')
+    f = check_vector('force', force, 3, 'N')
     k = check_stiffness(stiffness)
-    q0 = _vector('q_m0', q_m0, 3, 'rad')
+    q0 = check_vector('q_m0', q_m0, 3, 'rad')
     tol = float(tol)
     if not (math.isfinite(tol) and tol > 0.0):
         raise ValueError(f'expected tol positive and finite [m], got {tol!r}')
@@ -511,8 +489,8 @@ def straight_line_trajectory(
     ValueError
         On invalid arguments.
     """
-    a = _vector('x_start', x_start, 3, 'm')
-    b = _vector('x_goal', x_goal, 3, 'm')
+    a = check_vector('x_start', x_start, 3, 'm')
+    b = check_vector('x_goal', x_goal, 3, 'm')
     T = float(duration)
     if not (math.isfinite(T) and T > 0.0):
         raise ValueError(f'expected duration positive and finite [s], got {duration!r}')
@@ -606,14 +584,14 @@ def track_trajectory(
         raise ValueError(f'expected times strictly increasing, finite, shape (N,) with N >= 2 '
                          f'[s], got shape {t.shape}')
     N = t.size
-    X = _rows('x_d', x_d, 3, 'm')
-    V = _rows('v_d', v_d, 3, 'm/s')
+    X = check_rows('x_d', x_d, 3, 'm')
+    V = check_rows('v_d', v_d, 3, 'm/s')
     if X.shape[0] != N or V.shape[0] != N:
         raise ValueError(f'expected x_d and v_d of shape ({N}, 3) like times, got {X.shape} '
                          f'and {V.shape}')
-    f = _vector('force', force, 3, 'N')
+    f = check_vector('force', force, 3, 'N')
     k = check_stiffness(stiffness)
-    q_m = _vector('q_m0', q_m0, 3, 'rad').copy()
+    q_m = check_vector('q_m0', q_m0, 3, 'rad').copy()
     K = _gain(gain)
     if method not in ('paper', 'effective'):
         raise ValueError(f"expected method 'paper' or 'effective', got {method!r}")
@@ -733,13 +711,13 @@ def minimum_pressure_along(
         On invalid arguments or a failed spring equilibrium.
     """
     Qt = np.asarray(q_trajectory, dtype=float)
-    f = _vector('force', force, 3, 'N')
+    f = check_vector('force', force, 3, 'N')
     k = check_stiffness(stiffness)
     if Qt.ndim == 2 and Qt.shape[1] == 3:
-        Qm = _rows('q_trajectory', Qt, 3, 'rad')
+        Qm = check_rows('q_trajectory', Qt, 3, 'rad')
         springs = _Springs(arm, f, k)
         Qt = np.array([springs.solve(*q_m)[0] for q_m in Qm.tolist()])
-    Qt = _rows('q_trajectory', Qt, 7, 'rad')
+    Qt = check_rows('q_trajectory', Qt, 7, 'rad')
     if Qt.shape[0] == 0:
         raise ValueError('expected a non-empty q_trajectory')
     moments = link_moments(arm, Qt, f)

@@ -49,6 +49,7 @@ from inflarm_model.elastostatics import (  # the private helpers are this packag
     _stable,
     _surely_stable,
     arm_kernel,
+    check_rows,
     check_stiffness,
     float_list,
     link_moments,
@@ -641,18 +642,6 @@ class LoadPoseEstimateBatch:
     status: npt.NDArray[np.str_]
 
 
-def _rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
-    try:
-        V = np.asarray(X, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got {X!r}') from None
-    if V.ndim != 2 or V.shape[1] != n:
-        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got shape {V.shape}')
-    if not np.isfinite(V).all():
-        raise ValueError(f'expected {name} to be finite [{unit}], got non-finite entries')
-    return V
-
-
 def estimate_load_and_pose_batch(
     arm: object,
     Q_m: npt.ArrayLike,
@@ -693,8 +682,8 @@ def estimate_load_and_pose_batch(
         On arguments of the wrong shape, non-finite values or non-positive stiffness.
     """
     arm_kernel(arm)  # validates the arm layout
-    Q_m = _rows('Q_m', Q_m, 3, 'rad')
-    Tau = _rows('Tau_m', Tau_m, 3, 'N·m')
+    Q_m = check_rows('Q_m', Q_m, 3, 'rad')
+    Tau = check_rows('Tau_m', Tau_m, 3, 'N·m')
     if Tau.shape[0] != Q_m.shape[0]:
         raise ValueError(f'expected Tau_m of shape ({Q_m.shape[0]}, 3) like Q_m, '
                          f'got {Tau.shape}')

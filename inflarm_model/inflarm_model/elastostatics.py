@@ -57,7 +57,9 @@ __all__ = [
     'SpringEquilibrium',
     'SpringEquilibriumBatch',
     'arm_kernel',
+    'check_rows',
     'check_stiffness',
+    'check_vector',
     'flat_jacobian_batch',
     'float_list',
     'link_moments',
@@ -87,7 +89,7 @@ _FLOAT64 = np.dtype(np.float64)
 # --- validation ------------------------------------------------------------------------------
 
 
-def _vector(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
+def check_vector(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
     """Return ``x`` as a finite float array of shape (n,) or raise naming ``name``."""
     try:
         v = np.asarray(x, dtype=float)
@@ -111,10 +113,10 @@ def float_list(name: str, x: npt.ArrayLike, n: int, unit: str) -> list[float]:
         v = x.tolist()
         if _isfinite(sum(v)):
             return v
-    return _vector(name, x, n, unit).tolist()
+    return check_vector(name, x, n, unit).tolist()
 
 
-def _rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
+def check_rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
     """Return ``X`` as a finite float array of shape (N, n) or raise naming ``name``."""
     try:
         V = np.asarray(X, dtype=float)
@@ -132,8 +134,8 @@ def _rows_or_one(
 ) -> npt.NDArray[np.float64]:
     """Accept shape (n,) (one value shared by all N rows) or (N, n); return (N, n)."""
     if np.ndim(X) == 1:
-        return np.broadcast_to(_vector(name, X, n, unit), (N, n))
-    V = _rows(name, X, n, unit)
+        return np.broadcast_to(check_vector(name, X, n, unit), (N, n))
+    V = check_rows(name, X, n, unit)
     if V.shape[0] != N:
         raise ValueError(f'expected {name} of shape ({n},) or ({N}, {n}) [{unit}], '
                          f'got shape {V.shape}')
@@ -661,7 +663,7 @@ def spring_deflections_batch(
         On arguments of the wrong shape, non-finite values or non-positive stiffness.
     """
     arm_kernel(arm)  # validates the arm layout
-    Q_m = _rows('Q_m', Q_m, 3, 'rad')
+    Q_m = check_rows('Q_m', Q_m, 3, 'rad')
     N = Q_m.shape[0]
     F = _rows_or_one('forces', forces, 3, N, 'N')
     k = np.array(check_stiffness(stiffness))
@@ -746,7 +748,7 @@ def spring_deflections_batch(
 
 
 def _q7(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
-    return _vector('q', q, 7, 'rad')
+    return check_vector('q', q, 7, 'rad')
 
 
 def motor_torques(arm: object, q: npt.ArrayLike, force: npt.ArrayLike) -> npt.NDArray[np.float64]:
@@ -776,7 +778,7 @@ def motor_torques(arm: object, q: npt.ArrayLike, force: npt.ArrayLike) -> npt.ND
         If ``q`` or ``force`` has the wrong shape or is not finite.
     """
     q = _q7(q)
-    f = _vector('force', force, 3, 'N')
+    f = check_vector('force', force, 3, 'N')
     U = arm.jacobian(q)[:3]
     return U[:, MOTOR_INDICES].T @ f
 
@@ -805,7 +807,7 @@ def motor_torques_batch(
     ValueError
         On arguments of the wrong shape or non-finite values.
     """
-    Q = _rows('Q', Q, 7, 'rad')
+    Q = check_rows('Q', Q, 7, 'rad')
     F = _rows_or_one('forces', forces, 3, Q.shape[0], 'N')
     U = arm.jacobian_batch(Q)[:, :3, :]
     return np.einsum('nij,ni->nj', U[:, :, MOTOR_INDICES], F)
@@ -840,8 +842,8 @@ def spring_torques(
     q_arr = np.asarray(q, dtype=float)
     if q_arr.ndim == 1:
         U = arm.jacobian(_q7(q_arr))[:3]
-        return U[:, SPRING_INDICES].T @ _vector('force', force, 3, 'N')
-    Q = _rows('q', q_arr, 7, 'rad')
+        return U[:, SPRING_INDICES].T @ check_vector('force', force, 3, 'N')
+    Q = check_rows('q', q_arr, 7, 'rad')
     F = _rows_or_one('force', force, 3, Q.shape[0], 'N')
     U = arm.jacobian_batch(Q)[:, :3, :]
     return np.einsum('nij,ni->nj', U[:, :, SPRING_INDICES], F)
@@ -911,7 +913,7 @@ def load_hessian(
         If ``q`` or ``force`` has the wrong shape or is not finite.
     """
     J = arm.jacobian(_q7(q))
-    f = _vector('force', force, 3, 'N')
+    f = check_vector('force', force, 3, 'N')
     U, Z = J[:3], J[3:]
     skew = np.array([[0.0, -f[2], f[1]], [f[2], 0.0, -f[0]], [-f[1], f[0], 0.0]])
     # M[a, b] = (f x z_a) . u_b = z_a . (u_b x f), valid for a <= b.
