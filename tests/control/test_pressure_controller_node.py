@@ -159,3 +159,54 @@ def test_vent_ends_the_trial_and_holds_zero_pressure(executor):
     rig.spin(0.7)
     assert len(rig.commands) >= count + 2
     assert all(set(c.as_dict().values()) == {0.0} for c in rig.commands[count:])
+
+
+def test_a_planned_path_is_followed_waypoint_by_waypoint(executor):
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Path
+
+    from inflarm_msgs_json.ros.qos import LATCHED_QOS
+
+    rig = Rig(executor, path_tolerance_m=0.01)
+    path_pub = rig.probe.create_publisher(Path, 'planned_path', LATCHED_QOS)
+    waypoints = [(0.02, 0.02, 0.62), (0.05, 0.05, 0.64), TARGET]
+    rig.ball(START)
+    assert spin_until(executor, lambda: rig.controller.position is not None)
+    path = Path()
+    path.header.frame_id = 'sra_mount'
+    for point in waypoints:
+        pose = PoseStamped()
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = point
+        path.poses.append(pose)
+    path_pub.publish(path)
+    assert spin_until(executor, lambda: rig.controller.trial_active)
+    for reached, following in zip(waypoints, waypoints[1:]):
+        np.testing.assert_allclose(rig.controller.controller.target[0], reached)
+
+        def ball_arrives(point=reached, following=following):
+            rig.ball(point)  # the camera sees the ball at the waypoint...
+            return np.allclose(rig.controller.controller.target[0], following)  # ...next one
+        assert spin_until(executor, ball_arrives, timeout_s=5.0)
+    assert rig.controller.waypoints == []
+    np.testing.assert_allclose(rig.controller.controller.target[0], TARGET)
+
+
+def test_a_path_outside_the_workspace_is_rejected(executor):
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Path
+
+    from inflarm_msgs_json.ros.qos import LATCHED_QOS
+
+    rig = Rig(executor)
+    path_pub = rig.probe.create_publisher(Path, 'planned_path', LATCHED_QOS)
+    rig.ball(START)
+    assert spin_until(executor, lambda: rig.controller.position is not None)
+    path = Path()
+    path.header.frame_id = 'sra_mount'
+    for point in ((0.0, 0.0, 0.62), (0.0, 0.0, 1.5)):
+        pose = PoseStamped()
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = point
+        path.poses.append(pose)
+    path_pub.publish(path)
+    rig.spin(0.5)
+    assert not rig.controller.trial_active and rig.commands == []
