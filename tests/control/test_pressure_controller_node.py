@@ -180,7 +180,7 @@ def test_a_planned_path_is_followed_waypoint_by_waypoint(executor):
         path.poses.append(pose)
     path_pub.publish(path)
     assert spin_until(executor, lambda: rig.controller.trial_active)
-    for reached, following in zip(waypoints, waypoints[1:]):
+    for reached, following in zip(waypoints[:-1], waypoints[1:], strict=True):
         np.testing.assert_allclose(rig.controller.controller.target[0], reached)
 
         def ball_arrives(point=reached, following=following):
