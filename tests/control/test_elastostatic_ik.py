@@ -6,8 +6,8 @@ spring equilibrium with the textbook DH chain of ``inflarm_model.kinematics`` (n
 
 import numpy as np
 import pytest
-from scipy.optimize import root
 
+from elastostatic_reference import K_MEAN, M, full_q, reference_deflections
 from inflarm_control.elastostatic_ik import (
     effective_jacobian,
     minimum_pressure_along,
@@ -18,7 +18,7 @@ from inflarm_control.elastostatic_ik import (
     track_trajectory,
 )
 from inflarm_control.ik_figures import X_GOAL, X_START, main, run_scenario
-from inflarm_model.elastostatics import MOTOR_INDICES, SPRING_INDICES, spring_deflections
+from inflarm_model.elastostatics import spring_deflections
 from inflarm_model.kinematics import FlexibleArm, RigidArm, dh_fk_reference, dh_jacobian_reference
 from inflarm_model.link import (
     LINK_RADIUS,
@@ -27,9 +27,7 @@ from inflarm_model.link import (
     wrinkling_moment,
 )
 
-K_MEAN = 172.71  # k̄ of section 4 [N·m/rad]
 F_PAPER = np.array([0.0, 10.0, -15.0])  # f_e of section 4 [N]
-M, K = list(MOTOR_INDICES), list(SPRING_INDICES)
 
 
 @pytest.fixture(scope='module')
@@ -42,23 +40,13 @@ def rigid():
     return RigidArm()
 
 
-def full_q(q_m, q_k):
-    q = np.zeros(7)
-    q[M], q[K] = q_m, q_k
-    return q
+
 
 
 def deflected_tip(arm, q_m, force, k):
     """Independent: equilibrium by scipy root on the textbook DH chain, then its FK."""
-    k = np.broadcast_to(np.asarray(k, dtype=float), (4,))
-
-    def residual(q_k):
-        U = dh_jacobian_reference(arm.dh_table, full_q(q_m, q_k))[:3]
-        return k * q_k - U[:, K].T @ force
-
-    sol = root(residual, np.zeros(4), method='hybr', tol=1e-14)
-    assert np.abs(residual(sol.x)).max() < 1e-10
-    return dh_fk_reference(arm.dh_table, full_q(q_m, sol.x))[:3, 3]
+    q_k = reference_deflections(arm, q_m, force, k, max_residual=1e-10)
+    return dh_fk_reference(arm.dh_table, full_q(q_m, q_k))[:3, 3]
 
 
 TARGETS = [(0.7, 0.3, 0.4), (0.5, -0.6, 0.2), (0.9, 0.1, -0.3), (-0.4, 0.5, 0.6)]

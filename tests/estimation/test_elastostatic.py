@@ -7,20 +7,17 @@ Pinocchio), and tau_m = U_m^T f from the same Jacobian.
 
 import numpy as np
 import pytest
-from scipy.optimize import root
 
+from elastostatic_reference import K_MEAN, M, full_q, reference_deflections
 from inflarm_estimation.elastostatic import (
     estimate_load_and_pose,
     estimate_load_and_pose_batch,
     link_margins,
     link_moments,
 )
-from inflarm_model.elastostatics import MOTOR_INDICES, SPRING_INDICES, spring_deflections
+from inflarm_model.elastostatics import spring_deflections
 from inflarm_model.kinematics import FlexibleArm, dh_fk_reference, dh_jacobian_reference
 from inflarm_model.link import LINK_RADIUS, wrinkling_moment
-
-K_MEAN = 172.71  # k̄ of section 4 [N·m/rad]
-M, K = list(MOTOR_INDICES), list(SPRING_INDICES)
 
 
 @pytest.fixture(scope='module')
@@ -28,24 +25,14 @@ def arm():
     return FlexibleArm()
 
 
-def full_q(q_m, q_k):
-    q = np.zeros(7)
-    q[M], q[K] = q_m, q_k
-    return q
+
 
 
 def forward(arm, q_m, force, k):
     """Independent truth: spring deflections and motor torques under a tip force."""
-    k = np.broadcast_to(np.asarray(k, dtype=float), (4,))
-
-    def residual(q_k):
-        U = dh_jacobian_reference(arm.dh_table, full_q(q_m, q_k))[:3]
-        return k * q_k - U[:, K].T @ force
-
-    sol = root(residual, np.zeros(4), method='hybr', tol=1e-14)
-    assert np.abs(residual(sol.x)).max() < 1e-10
-    U = dh_jacobian_reference(arm.dh_table, full_q(q_m, sol.x))[:3]
-    return sol.x, U[:, M].T @ force
+    q_k = reference_deflections(arm, q_m, force, k, max_residual=1e-10)
+    U = dh_jacobian_reference(arm.dh_table, full_q(q_m, q_k))[:3]
+    return q_k, U[:, M].T @ force
 
 
 def identifiable(arm, q_m, force, k, q_k):

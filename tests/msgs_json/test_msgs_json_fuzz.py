@@ -4,9 +4,9 @@ import json
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from msgs_json_cases import STRATEGIES, json_values, keys, mutated_messages
 
 from inflarm_msgs_json import MESSAGE_TYPES, MessageError, decode, encode
+from msgs_json_cases import STRATEGIES, json_values, keys, mutated_messages
 
 FUZZ = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -10,7 +10,6 @@ import re
 import subprocess
 import sys
 
-from msgs_json_cases import EXAMPLES
 import numpy as np
 import pytest
 
@@ -29,6 +28,7 @@ from inflarm_msgs_json import (
     decode,
     encode,
 )
+from msgs_json_cases import EXAMPLES
 
 # --- round trips and the envelope ---------------------------------------------------------------
 

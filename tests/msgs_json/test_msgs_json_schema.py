@@ -5,12 +5,12 @@ from pathlib import Path
 
 from hypothesis import given, settings
 import jsonschema
-from msgs_json_cases import EXAMPLES, messages, mutated_messages
 import pytest
 
 import inflarm_msgs_json
 from inflarm_msgs_json import MESSAGE_TYPES, Cuboid, MessageError, decode, encode, json_schema
 from inflarm_msgs_json.schema_export import main, schema_filename, schema_text
+from msgs_json_cases import EXAMPLES, messages, mutated_messages
 
 SCHEMA_DIR = Path(__file__).resolve().parents[2] / 'inflarm_msgs_json' / 'schema'
 REGENERATE = 'python -m inflarm_msgs_json.schema_export inflarm_msgs_json/schema'
