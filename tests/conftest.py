@@ -4,10 +4,11 @@ Every test gets its own ROS_DOMAIN_ID; DDS stays on loopback with fast discovery
 (scripts/fastdds_profile.xml). Waits are bounded waits on data, never fixed sleeps.
 """
 
-import itertools
+import fcntl
 import os
 import pathlib
 import sys
+import tempfile
 
 import pytest
 
@@ -22,13 +23,35 @@ os.environ.update(ros_environment())
 
 from ros_harness import NodeProcesses  # noqa: E402
 
-# Domain ids 1-100, spread by process id so concurrent test runs rarely meet.
-_domain_ids = itertools.count(os.getpid() % 100)
+# ROS domain ids 1-100 are taken under a file lock for the length of a test, so that test runs
+# going on at the same time on this machine (other checkouts, CI) never share a domain.
+DOMAIN_LOCKS = pathlib.Path(tempfile.gettempdir()) / 'inflarm-ros-domains'
+_next_domain = os.getpid() % 100
+
+
+def _lock_free_domain():
+    """(domain id, open lock file) for the first domain no other process holds."""
+    global _next_domain
+    DOMAIN_LOCKS.mkdir(exist_ok=True)
+    for _ in range(100):
+        candidate = _next_domain % 100 + 1
+        _next_domain += 1
+        lock = open(DOMAIN_LOCKS / f'{candidate}.lock', 'w')  # noqa: SIM115 (held by the test)
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            continue
+        return candidate, lock
+    raise RuntimeError(f'every ROS domain 1-100 is in use by other test runs ({DOMAIN_LOCKS})')
 
 
 @pytest.fixture
-def domain_id() -> int:
-    return next(_domain_ids) % 100 + 1
+def domain_id():
+    """A ROS domain id that no other test, in this run or any other, uses meanwhile."""
+    domain, lock = _lock_free_domain()
+    yield domain
+    lock.close()  # releases the lock
 
 
 @pytest.fixture
