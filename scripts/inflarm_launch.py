@@ -186,7 +186,7 @@ class ProcessGroup:
         for thread in self._threads:
             thread.join(timeout=2.0)
         for name in hung:
-            print(self.describe(name, f'did not stop within {grace_s:.0f} s of SIGINT: killed'),
+            print(self.describe(name, f'did not stop within {grace_s:g} s of SIGINT: killed'),
                   file=sys.stderr)
         return {name: process.returncode for name, process in self.processes.items()}
 
