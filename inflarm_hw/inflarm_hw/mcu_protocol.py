@@ -291,7 +291,7 @@ MESSAGES: dict[int, type[Message]] = {
 assert max(cls.LAYOUT.size for cls in MESSAGES.values()) <= MAX_PAYLOAD
 
 
-def encode_frame(message: Message, seq: int) -> bytes:
+def encode_frame(message: Message, seq: int, crc_xor: int = 0) -> bytes:
     """The wire bytes of one frame: ``COBS(header + payload + CRC-32) + 0x00``.
 
     Parameters
@@ -300,9 +300,11 @@ def encode_frame(message: Message, seq: int) -> bytes:
         The payload.
     seq : int
         Sender's sequence number; taken mod 2^16.
+    crc_xor : int
+        XORed into the CRC (fault injection: any non-zero value makes a frame receivers drop).
     """
     raw = HEADER.pack(message.TYPE, 0, seq & 0xFFFF) + message.pack()
-    raw += CRC.pack(zlib.crc32(raw))
+    raw += CRC.pack(zlib.crc32(raw) ^ (crc_xor & 0xFFFFFFFF))
     return cobs.encode(raw) + DELIMITER
 
 
