@@ -27,6 +27,8 @@ setup(
             'arm_sim = inflarm_hw.nodes.arm_sim:main',
             'bag_recorder = inflarm_hw.nodes.bag_recorder:main',
             'bag_player = inflarm_hw.nodes.bag_player:main',
+            'hw_bridge = inflarm_hw.nodes.hw_bridge:main',
+            'sim_mcu = inflarm_hw.nodes.sim_mcu:main',
         ],
     },
 )

@@ -463,6 +463,7 @@ class SafetySupervisor:
                 f'{device.n_chambers} chambers, {device.n_links} links; configured with '
                 f'{was.n_motors}, {was.n_chambers}, {was.n_links})')
         self.device = device
+        self._pending = None  # sequence numbers of the old session mean nothing now
         if self.link_lost is not None:
             self._event('link_restored', 'info',
                         'link to the MCU restored; outputs follow fresh commands again')
@@ -610,6 +611,8 @@ class SafetySupervisor:
                 motor = 'no motor_position_command yet'
             elif now - self._motor_time > c.cmd_timeout_s:
                 motor = f'no motor_position_command for {c.cmd_timeout_s} s'
+            elif self._motor_target is None:  # after a safe output: a fresh command resumes
+                motor = 'waiting for a fresh motor_position_command'
             elif any(level == 'stop' for level in self._wrinkle.values()):
                 motor = 'wrinkle_stop: a link is below its wrinkle-safe pressure'
         if valve is None and self.device.n_chambers > 0:
@@ -632,13 +635,15 @@ class SafetySupervisor:
     def _note_transition(self, motor: str | None, valve: str | None, now: float) -> None:
         before_motor, before_valve = self._reasons
         self._reasons = (motor, valve)
-        for before, after in ((before_motor, motor), (before_valve, valve)):
+        for group, before, after in (('motor', before_motor, motor),
+                                     ('valve', before_valve, valve)):
             if before is None and after is not None:
-                if self._pending is None:
+                # no confirmation can come over a lost link (the MCU's watchdog acts)
+                if self._pending is None and after != 'link_lost':
                     self._pending = _PendingSafe(self._deadline(after, now), after)
-                self._event('safe_output', 'warning', f'safe output: {after}')
+                self._event(f'safe_{group}', 'warning', f'safe {group} output: {after}')
             elif before and after is None:
-                self._event('follow_output', 'info', 'outputs follow the commands')
+                self._event(f'follow_{group}', 'info', f'{group} outputs follow the commands')
 
     def _latch(self, name: str, detail: str, link: bool, now: float) -> None:
         if name in self._latched:
