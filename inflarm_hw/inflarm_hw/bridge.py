@@ -305,6 +305,11 @@ class _PendingSafe:
     seq: int | None = None
 
 
+def _internal(**kwargs):
+    """A dataclass field that is internal state: not an __init__ argument, not in repr."""
+    return field(init=False, repr=False, **kwargs)
+
+
 @dataclass
 class _Sensor:
     value: float = math.nan
@@ -330,22 +335,23 @@ class SafetySupervisor:
     safe_latency: float | None = None
     link_lost: str | None = None
     state: State | None = None
-    _motor_target: np.ndarray | None = None
-    _motor_velocity: np.ndarray = field(default_factory=lambda: np.zeros(N_MOTORS))
-    _motor_time: float | None = None
-    _chamber_target: np.ndarray = field(default_factory=lambda: np.zeros(N_CHAMBERS))
-    _chamber_time: float | None = None
-    _motor_out: np.ndarray | None = None
-    _chamber_out: np.ndarray | None = None
-    _link_out: np.ndarray | None = None
-    _last_output: float | None = None
-    _latched: dict[str, _Latched] = field(default_factory=dict)
-    _sensors: list[_Sensor] = field(default_factory=list)
-    _link_status: dict[int, tuple[float, float]] = field(default_factory=dict)
-    _wrinkle: dict[int, str] = field(default_factory=dict)  # link index -> 'warn' or 'stop'
+    # internal state, not constructor arguments
+    _motor_target: np.ndarray | None = _internal(default=None)
+    _motor_velocity: np.ndarray = _internal(default_factory=lambda: np.zeros(N_MOTORS))
+    _motor_time: float | None = _internal(default=None)
+    _chamber_target: np.ndarray = _internal(default_factory=lambda: np.zeros(N_CHAMBERS))
+    _chamber_time: float | None = _internal(default=None)
+    _motor_out: np.ndarray | None = _internal(default=None)
+    _chamber_out: np.ndarray | None = _internal(default=None)
+    _link_out: np.ndarray | None = _internal(default=None)
+    _last_output: float | None = _internal(default=None)
+    _latched: dict[str, _Latched] = _internal(default_factory=dict)
+    _sensors: list[_Sensor] = _internal(default_factory=list)
+    _link_status: dict[int, tuple[float, float]] = _internal(default_factory=dict)
+    _wrinkle: dict[int, str] = _internal(default_factory=dict)  # link -> 'warn' or 'stop'
     # why each output (motors, valves) is safe, None while it follows; '' before the first
-    _reasons: tuple[str | None, str | None] = ('', '')
-    _pending: _PendingSafe | None = None
+    _reasons: tuple[str | None, str | None] = _internal(default=('', ''))
+    _pending: _PendingSafe | None = _internal(default=None)
 
     def __post_init__(self) -> None:
         self._sensors = [_Sensor() for _ in range(N_CHAMBERS + N_LINKS)]
@@ -373,6 +379,7 @@ class SafetySupervisor:
         if self._motor_target is None:
             self._motor_target = (self._measured_motors() if self._motor_out is None
                                   else self._motor_out.copy())
+        self._motor_velocity[:] = 0.0  # feed-forward only for the joints named now
         for i, q in target.position.items():
             self._motor_target[i] = q
             self._motor_velocity[i] = target.velocity.get(i, 0.0)

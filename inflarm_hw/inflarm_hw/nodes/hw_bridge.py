@@ -315,8 +315,8 @@ class HwBridge(LifecycleNode):
             supervisor.sent(driver.write(supervisor.output(time.monotonic(), enabled=False)))
             self.get_logger().info(f'{why}: safe output commanded')
         except McuError as err:
-            self.get_logger().error(f'{why}: safe output not sent ({err}); the MCU watchdog '
-                                    'makes the outputs safe')
+            self.get_logger().warning(f'{why}: safe output not sent ({err}); the MCU watchdog '
+                                      'makes the outputs safe')
         self.log_events()
 
     def release(self, why: str) -> None:
