@@ -22,7 +22,7 @@ Publishes (for the channels the MCU has, from configure on, one message per MCU 
     chamber_pressures (std_msgs/String: ChamberPressures JSON, RELIABLE_QOS): measured [Pa].
     link_pressures (std_msgs/String: LinkPressures JSON, RELIABLE_QOS): measured [Pa].
     ~/status (std_msgs/String: HardwareStatus JSON, LATCHED_QOS): outputs, link, faults; on
-        every change.
+        every change, and at least once a second.
     diagnostics (diagnostic_msgs/DiagnosticArray, RELIABLE_QOS): about 1 Hz, always.
 Services:
     ~/reset_fault (std_srvs/Trigger): clear the latched faults once their cause is gone.
