@@ -27,6 +27,8 @@ setup(
             'arm_sim = inflarm_hw.executables:arm_sim',
             'bag_recorder = inflarm_hw.executables:bag_recorder',
             'bag_player = inflarm_hw.executables:bag_player',
+            'hw_bridge = inflarm_hw.executables:hw_bridge',
+            'sim_mcu = inflarm_hw.executables:sim_mcu',
         ],
     },
 )

@@ -39,7 +39,9 @@ from inflarm_control.nodes.tip_path_demo import TipPathDemo
 from inflarm_control.nodes.trial_runner import TrialRunner
 from inflarm_estimation.nodes.load_estimator import LoadEstimator
 from inflarm_hw.nodes.arm_sim import ArmSim
+from inflarm_hw.nodes.hw_bridge import HwBridge
 from inflarm_hw.nodes.joint_state_monitor import JointStateMonitor
+from inflarm_hw.nodes.sim_mcu import SimMcuNode
 from inflarm_hw.nodes.sra_sim import SraSim
 from inflarm_model.elastostatics import motor_torques, spring_deflections
 from inflarm_model.kinematics import FlexibleArm
@@ -58,6 +60,7 @@ from inflarm_msgs_json import (
     encode,
 )
 from inflarm_msgs_json.ros.conversions import to_string_msg
+from ros_harness import wait_until
 
 ARM = FlexibleArm()
 LOAD = np.array([0.0, 10.0, -15.0])
@@ -216,6 +219,25 @@ class NodeCase:
     overrides: dict = field(default_factory=dict)
     # topic -> (message factory taking the node, check(node, published) -> bool)
     valid: dict[str, tuple[Callable, Callable]] = field(default_factory=dict)
+    # what the node needs around it: (node_processes, tmp_path) -> more overrides
+    prepare: Callable | None = None
+    # after construction, e.g. lifecycle transitions
+    start: Callable | None = None
+
+
+def start_sim_mcu(node_processes, tmp_path) -> dict:
+    """A simulated MCU (a real process on a pty) for hw_bridge to configure against."""
+    link = str(tmp_path / 'mcu')
+    node_processes.start('inflarm_hw', 'sim_mcu', parameters={'plant': 'both', 'link': link})
+    assert wait_until(lambda: 'sim_mcu: serial port' in node_processes.output(), 20.0), \
+        node_processes.output()
+    return {'port': link}
+
+
+def configure_and_activate(node) -> None:
+    from rclpy.lifecycle import TransitionCallbackReturn
+    assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS, node.problems.last
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
 
 
 def _published(topic):
@@ -258,6 +280,17 @@ NODES = {
                          lambda n, out: len(n.waypoints) == 1)}),
     'trial_runner': NodeCase(TrialRunner, valid={
         'trial_report': (lambda n: _report(n), lambda n, out: n.trial == 1)}),
+    'hw_bridge': NodeCase(HwBridge, prepare=start_sim_mcu, start=configure_and_activate, valid={
+        'motor_position_command': (
+            lambda n: JointState(name=['joint_1'], position=[0.1]),
+            lambda n, out: n.supervisor.rejected == _rejected_before(n)),
+        'chamber_pressure_command': (
+            lambda n: to_string_msg(PressureCommand(chambers={'PEA': 10e3})),
+            lambda n, out: n.supervisor.rejected == _rejected_before(n)),
+        'link_status': (
+            lambda n: to_string_msg(LinkStatus.from_moments('link_1', 50e3, 20.0, 5.0)),
+            lambda n, out: 0 in n.supervisor._link_status)}),  # noqa: SLF001
+    'sim_mcu': NodeCase(SimMcuNode),
     'joint_state_monitor': NodeCase(JointStateMonitor, valid={
         'joint_states': (lambda n: JointState(name=['joint_1'], position=[0.1]),
                          lambda n, out: n.latest is not None)}),
@@ -267,6 +300,11 @@ NODES = {
 def _path_from_current_tip(node) -> Path:
     tip = spring_deflections(ARM, node.q_m, LOAD, 172.71).tip_position
     return path([tuple(tip), tuple(tip + 0.02)], 'base_link', node)
+
+
+def _rejected_before(node) -> int:
+    """The supervisor's rejection count before the valid message (set by the harness)."""
+    return node.rejected_before_valid
 
 
 def _wrench(node) -> WrenchStamped:
@@ -285,9 +323,11 @@ def _report(node) -> String:
 class Harness:
     """A node in-process, its callbacks called directly, its publications recorded."""
 
-    def __init__(self, context, case: NodeCase) -> None:
+    def __init__(self, context, case: NodeCase, extra: dict | None = None) -> None:
         self.node = case.make(context=context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in case.overrides.items()])
+            Parameter(k, value=v) for k, v in {**case.overrides, **(extra or {})}.items()])
+        if case.start is not None:
+            case.start(self.node)
         self.case = case
         self.published: list[tuple[str, object]] = []
         for publisher in self.node.publishers:
@@ -323,11 +363,14 @@ class Harness:
 
 
 @pytest.mark.parametrize('name', sorted(NODES))
-def test_hostile_input_is_rejected_and_the_node_keeps_answering(name, ros_context):
-    harness = Harness(ros_context, NODES[name])
+def test_hostile_input_is_rejected_and_the_node_keeps_answering(name, ros_context,
+                                                                node_processes, tmp_path):
+    case = NODES[name]
+    extra = case.prepare(node_processes, tmp_path) if case.prepare else None
+    harness = Harness(ros_context, case, extra)
     node = harness.node
     topics = sorted(harness.subscriptions())
-    assert set(NODES[name].valid) == set(topics), f'{name}: give a valid message per topic'
+    assert set(case.valid) == set(topics), f'{name}: give a valid message per topic'
 
     @settings(max_examples=40, deadline=None, derandomize=True,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -348,9 +391,12 @@ def test_hostile_input_is_rejected_and_the_node_keeps_answering(name, ros_contex
         assert node.problems.unexpected == 0, node.problems.last
 
     try:
-        feed_hostile()
+        if topics:
+            feed_hostile()
         # Afterwards, the valid messages are answered correctly, topic by topic.
-        for topic, (make_msg, answered) in NODES[name].valid.items():
+        for topic, (make_msg, answered) in case.valid.items():
+            node.rejected_before_valid = getattr(getattr(node, 'supervisor', None), 'rejected',
+                                                 0)
             out = harness.feed(topic, make_msg(node))
             assert answered(node, out), f'{name}: a valid {topic} was not answered: ' \
                                         f'{node.problems.last.get(topic)}'
@@ -364,7 +410,7 @@ def test_hostile_input_is_rejected_and_the_node_keeps_answering(name, ros_contex
 @pytest.mark.parametrize('name', sorted(NODES))
 def test_parameters_out_of_range_or_read_only_are_refused(name, ros_context):
     node = NODES[name].make(context=ros_context, parameter_overrides=[
-        Parameter(k, value=v) for k, v in NODES[name].overrides.items()])
+        Parameter(k, value=v) for k, v in NODES[name].overrides.items()])  # unconfigured
     try:
         refused = 0
         for param_name in node._parameters:  # noqa: SLF001 (every declared parameter)

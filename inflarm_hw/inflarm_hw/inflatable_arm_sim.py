@@ -139,6 +139,7 @@ class InflatableArmSim:
         self.q_m = _finite('q_m0', q_m0, 3)
         self.dq_m = np.zeros(3)
         self.target = self.q_m.copy()
+        self.feed_forward = np.zeros(3)
         self.force = np.zeros(3)
         self.q_k = np.zeros(4)
         self.wrinkled = np.zeros(2, dtype=bool)
@@ -160,16 +161,18 @@ class InflatableArmSim:
         """External tip force [N], base frame; the links settle to it at the next step."""
         self.force = _finite('force', force, 3)
 
-    def command(self, q_m: npt.ArrayLike) -> None:
-        """New motor position targets [rad]."""
+    def command(self, q_m: npt.ArrayLike, dq_m: npt.ArrayLike | None = None) -> None:
+        """New motor position targets [rad], with an optional velocity feed-forward [rad/s]
+        added to each motor's position loop (default 0)."""
         self.target = _finite('q_m', q_m, 3)
+        self.feed_forward = np.zeros(3) if dq_m is None else _finite('dq_m', dq_m, 3)
 
     def step(self, dt: float) -> ArmSimState:
         """Advance ``dt`` seconds and return the new sample."""
         if not (np.isfinite(dt) and dt > 0.0):
             raise ValueError(f'expected dt > 0 s, got {dt}')
         p = self.params
-        velocity = (self.target - self.q_m) / max(p.motor_time_constant, dt)
+        velocity = self.feed_forward + (self.target - self.q_m) / max(p.motor_time_constant, dt)
         velocity = np.clip(velocity, -p.motor_max_velocity, p.motor_max_velocity)
         self.q_m = self.q_m + velocity * dt
         self.dq_m = velocity

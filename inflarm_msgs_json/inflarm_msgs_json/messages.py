@@ -114,6 +114,68 @@ class ChamberPressures(_ChamberPressureMap):
 
 
 @dataclass(frozen=True)
+class LinkPressures(Message):
+    """Measured gauge pressure per inflated link of the inflatable arm.
+
+    ``links`` is built from a mapping such as ``{'link_1': 50010.0}`` and stored as (name,
+    value) pairs sorted by name; ``as_dict()`` gives the mapping back.
+    """
+
+    links: tuple[tuple[str, float], ...] = field_spec(
+        Map(Number(minimum=VACUUM_GAUGE_PA)),
+        "gauge pressure by link name ('link_1', 'link_2'), at least one, not below vacuum [Pa]",
+    )
+
+    def as_dict(self) -> dict[str, float]:
+        """Return the pressures as a new ``{link name: gauge pressure [Pa]}`` dict."""
+        return dict(self.links)
+
+
+#: HardwareStatus.state: the lifecycle state of the bridge.
+BRIDGE_STATES = ('unconfigured', 'inactive', 'active', 'finalized')
+#: HardwareStatus.link: the serial link to the MCU.
+LINK_STATES = ('closed', 'handshake', 'connected', 'lost')
+#: HardwareStatus.motors: what the motors are told; 'none' when the MCU has none.
+MOTOR_OUTPUTS = ('none', 'follow', 'hold', 'zero_torque')
+#: HardwareStatus.valves: what the valves are told; 'none' when the MCU has none.
+VALVE_OUTPUTS = ('none', 'follow', 'safe')
+
+
+@dataclass(frozen=True)
+class HardwareStatus(Message):
+    """State of a hardware bridge: its outputs, the MCU link, faults and its reaction time."""
+
+    state: str = field_spec(Choice(BRIDGE_STATES), 'lifecycle state of the bridge')
+    link: str = field_spec(Choice(LINK_STATES), 'serial link to the MCU')
+    motors: str = field_spec(
+        Choice(MOTOR_OUTPUTS), "motor output: following commands, or a safe 'hold' or zero torque"
+    )
+    valves: str = field_spec(
+        Choice(VALVE_OUTPUTS), "valve output: following commands, or the configured 'safe' one"
+    )
+    faults: tuple[str, ...] = field_spec(Array(NAME), 'active faults, latched ones included')
+    latched: tuple[str, ...] = field_spec(
+        Array(NAME), 'faults that hold the safe output until reset (a subset of faults)'
+    )
+    reason: str = field_spec(
+        Text(allow_empty=True), 'why an output is safe; empty while both follow commands'
+    )
+    safe_latency: float | None = field_spec(
+        Nullable(NONNEGATIVE),
+        'last measured time from detecting a fault or timeout to the MCU confirming the safe '
+        'output, null if none yet [s]',
+    )
+    clamped: int = field_spec(COUNT, 'commands clamped to a limit since start')
+    rejected: int = field_spec(COUNT, 'commands rejected since start')
+    bad_frames: int = field_spec(COUNT, 'bad frames received from the MCU since start')
+
+    def _check_invariants(self, path: str) -> None:
+        extra = sorted(set(self.latched) - set(self.faults))
+        if extra:
+            raise MessageError(f'{path}.latched', f'expected a subset of faults, got {extra}')
+
+
+@dataclass(frozen=True)
 class ControlTask(Message):
     """Task for the tip controller: reach a target, in one trial of a series."""
 

@@ -9,6 +9,8 @@ from inflarm_msgs_json import (
     ChamberPressures,
     ControlTask,
     Cuboid,
+    HardwareStatus,
+    LinkPressures,
     LinkStatus,
     ObstacleSet,
     PlanRequest,
@@ -34,6 +36,10 @@ EXAMPLES = {
     'ControlTask': ControlTask('base_link', (0.1, 0.2, 0.3), 'pid_ilc', 4),
     'TrialReport': TrialReport(3, (0.004, 0.0, 0.012), (1.25, None, 0.0)),
     'LinkStatus': LinkStatus('link_1', 35000.0, 2.5, 0.75, 1.75),
+    'LinkPressures': LinkPressures({'link_1': 50010.5, 'link_2': 49990.0}),
+    'HardwareStatus': HardwareStatus(
+        'active', 'connected', 'hold', 'safe', ('over_pressure', 'link_lost'),
+        ('over_pressure',), 'over_pressure: B1 at 131000 Pa', 0.023, 2, 1, 0),
 }
 
 finite = st.floats(allow_nan=False, allow_infinity=False) | st.integers(-(10**6), 10**6)
@@ -71,6 +77,20 @@ STRATEGIES = {
         st.tuples(*[st.none() | nonnegative] * 3),
     ),
     'LinkStatus': st.builds(LinkStatus.from_moments, names, positive, nonnegative, nonnegative),
+    'LinkPressures': st.builds(LinkPressures, gauge_pressures),
+    'HardwareStatus': st.lists(names, max_size=4, unique=True).flatmap(
+        lambda faults: st.builds(
+            HardwareStatus,
+            st.sampled_from(['unconfigured', 'inactive', 'active', 'finalized']),
+            st.sampled_from(['closed', 'handshake', 'connected', 'lost']),
+            st.sampled_from(['none', 'follow', 'hold', 'zero_torque']),
+            st.sampled_from(['none', 'follow', 'safe']),
+            st.just(tuple(faults)),
+            st.lists(st.sampled_from(faults), unique=True).map(tuple) if faults
+            else st.just(()),
+            st.text(max_size=20),
+            st.none() | nonnegative,
+            counts, counts, counts)),
 }
 
 messages = st.one_of(*STRATEGIES.values())

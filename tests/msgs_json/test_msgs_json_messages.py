@@ -36,7 +36,7 @@ from msgs_json_cases import EXAMPLES
 def test_examples_cover_every_message_type():
     assert set(EXAMPLES) == set(MESSAGE_TYPES) == {
         'ObstacleSet', 'PlanRequest', 'PressureCommand', 'ChamberPressures', 'ControlTask',
-        'TrialReport', 'LinkStatus',
+        'TrialReport', 'LinkStatus', 'LinkPressures', 'HardwareStatus',
     }  # fmt: skip
 
 
@@ -360,3 +360,11 @@ def test_import_does_not_import_rclpy():
         [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=60
     )
     assert result.returncode == 0, result.stderr
+
+
+def test_hardware_status_latched_faults_are_active_faults():
+    from inflarm_msgs_json import HardwareStatus
+    with pytest.raises(MessageError, match=r"HardwareStatus.latched: expected a subset of faults, "
+                                           r"got \['frozen_sensor'\]"):
+        HardwareStatus('active', 'connected', 'hold', 'safe', ('over_pressure',),
+                       ('frozen_sensor',), '', None, 0, 0, 0)

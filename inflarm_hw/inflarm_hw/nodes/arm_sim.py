@@ -26,8 +26,6 @@ Parameters:
     frame_id (string, read-only): base frame.
 """
 
-import dataclasses
-import math
 import time
 
 from geometry_msgs.msg import PointStamped
@@ -36,35 +34,23 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from inflarm_hw.inflatable_arm_sim import ArmSimParams, InflatableArmSim
-from inflarm_model.kinematics import FlexibleArm
-from inflarm_model.nodes.arm_parameters import (
-    ARM_PARAMETERS,
-    arm_from_parameters,
-    check_arm_parameters,
+from inflarm_hw.nodes.plant_parameters import (
+    ARM_PLANT_PARAMETERS,
+    apply_arm_plant_parameter,
+    arm_plant_from_parameters,
+    check_arm_plant_parameters,
 )
+from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.ros_conversions import joint_arrays, joint_state
-from inflarm_model.urdf import check_joint_positions
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
 
-PARAMETERS = ARM_PARAMETERS + (
-    Parameter('tip_force_n', [0.0, 10.0, -15.0],
-              'external tip load [N], base frame (default: the sample load of section 4)'),
+PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('rate_hz', 50.0, 'simulation and publishing rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
-    Parameter('initial_motor_positions_rad', [0.0, 0.6, -1.2],
-              'joint_1..joint_3 at start [rad]', read_only=True),
-    Parameter('motor.time_constant_s', 0.1, 'motor position time constant [s]',
-              range=(0.001, 10.0), read_only=True),
-    Parameter('motor.max_velocity_rad_s', 1.0, 'motor rate limit [rad/s]', range=(0.01, 100.0),
-              read_only=True),
-    Parameter('noise.position_rad', 1e-4, 'motor angle noise (std) [rad]', range=(0.0, 0.1)),
-    Parameter('noise.effort_nm', 0.02, 'motor torque noise (std) [N m]', range=(0.0, 10.0)),
-    Parameter('wrinkling', False, 'saturate link moments at M_max (Table 3)', read_only=True),
     Parameter('cmd_timeout_s', 1.0,
               'hold the motors where they are after this long without a command [s]',
               range=(0.05, 5.0)),
@@ -72,35 +58,7 @@ PARAMETERS = ARM_PARAMETERS + (
               read_only=True),
     Parameter('frame_id', 'base_link', 'base frame', read_only=True),
 )
-
-
 MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
-MAX_TIP_FORCE_N = 500.0  # beyond this the links buckle long before: no equilibrium to simulate
-
-
-def check_tip_force(force) -> str | None:
-    """Why ``force`` is not a tip load to simulate, or None."""
-    if len(force) != 3 or not all(math.isfinite(v) for v in force):
-        return f'tip_force_n must be 3 finite numbers, got {list(force)}'
-    if math.hypot(*force) > MAX_TIP_FORCE_N:
-        return f'tip_force_n {list(force)} is over {MAX_TIP_FORCE_N:.0f} N'
-    return None
-
-
-def check_sim_parameters(values: dict) -> str | None:
-    """Why these parameter values are not a simulation to run, or None."""
-    problem = check_arm_parameters(values)
-    if problem is None and 'tip_force_n' in values:
-        problem = check_tip_force(values['tip_force_n'])
-    if problem is None and 'initial_motor_positions_rad' in values:
-        start = values['initial_motor_positions_rad']
-        if len(start) != 3:
-            return f'initial_motor_positions_rad must be 3 numbers, got {list(start)}'
-        try:
-            check_joint_positions(MOTORS, start)
-        except ValueError as error:
-            return f'initial_motor_positions_rad: {error}'
-    return problem
 
 
 class ArmSim(GuardedCallbacks, Node):
@@ -108,19 +66,11 @@ class ArmSim(GuardedCallbacks, Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('arm_sim', **kwargs)
         self.params = p = declare_parameters(self, PARAMETERS)
-        problem = check_sim_parameters(p)
+        problem = check_arm_plant_parameters(p)
         if problem is not None:
             raise ValueError(problem)
         seed = p['seed']
-        self.sim = InflatableArmSim(
-            arm_from_parameters(p), p['arm.spring_stiffness'], p['arm.link_pressure_pa'],
-            p['arm.link_radius_m'], p['initial_motor_positions_rad'],
-            ArmSimParams(motor_time_constant=p['motor.time_constant_s'],
-                         motor_max_velocity=p['motor.max_velocity_rad_s'],
-                         position_noise=p['noise.position_rad'],
-                         effort_noise=p['noise.effort_nm'], wrinkling=p['wrinkling']),
-            np.random.default_rng(None if seed < 0 else seed))
-        self.sim.set_tip_force(p['tip_force_n'])
+        self.sim = arm_plant_from_parameters(p, np.random.default_rng(None if seed < 0 else seed))
         self.dt = 1.0 / p['rate_hz']
         self.last_command_time: float | None = None  # steady clock; None: holding
 
@@ -135,23 +85,15 @@ class ArmSim(GuardedCallbacks, Node):
         self.get_logger().info(f"ready: tip load {p['tip_force_n']} N at {p['rate_hz']} Hz")
 
     def on_set_parameters(self, parameters) -> SetParametersResult:
-        problem = check_sim_parameters({q.name: q.value for q in parameters})
+        problem = check_arm_plant_parameters({q.name: q.value for q in parameters})
         return SetParametersResult(successful=problem is None, reason=problem or '')
 
     def on_parameters_set(self, parameters) -> None:
         for q in parameters:
             self.params[q.name] = q.value
-            if q.name == 'tip_force_n':
-                self.sim.set_tip_force(q.value)
-                self.get_logger().info(f'tip load now {list(q.value)} N')
-            elif q.name == 'arm.spring_stiffness':
-                self.sim.set_stiffness(q.value)
-            elif q.name == 'arm.link_pressure_pa':
-                self.sim.set_link_pressure(q.value)
-            elif q.name.startswith('noise.'):
-                field = {'noise.position_rad': 'position_noise',
-                         'noise.effort_nm': 'effort_noise'}[q.name]
-                self.sim.params = dataclasses.replace(self.sim.params, **{field: q.value})
+            change = apply_arm_plant_parameter(self.sim, q.name, q.value)
+            if change is not None:
+                self.get_logger().info(change)
 
     def on_command(self, msg: JointState) -> None:
         names = [n for n in MOTORS if n in msg.name]

@@ -27,12 +27,11 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
-from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS
+from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
 from inflarm_msgs_json import ChamberPressures, PressureCommand
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -55,22 +54,6 @@ PARAMETERS = (
     Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
               read_only=True),
 )
-
-
-def check_command(command: PressureCommand, max_pressure: float) -> dict[str, float]:
-    """The set pressures of a valid command, by chamber; InputError naming what is wrong."""
-    pressures = command.as_dict()
-    unknown = sorted(set(pressures) - set(CHAMBERS))
-    if unknown:
-        raise InputError('unknown chamber',
-                         f'unknown chambers {unknown}, expected some of {list(CHAMBERS)}')
-    for name, pressure in pressures.items():
-        if not 0.0 <= pressure <= max_pressure:
-            raise InputError(
-                'pressure out of range',
-                f'{name} at {pressure:.6g} Pa is outside 0..{max_pressure:.0f} Pa (the valves '
-                'give positive pressure only, up to the chamber maximum)')
-    return pressures
 
 
 class SraSim(GuardedCallbacks, Node):
@@ -113,8 +96,9 @@ class SraSim(GuardedCallbacks, Node):
                                                         noise_std=parameter.value)
 
     def on_command(self, msg: String) -> None:
-        command = check_command(from_string_msg(msg, expected=PressureCommand),
-                                self.params['max_chamber_pressure_pa'])
+        command = check_chamber_pressures(
+            from_string_msg(msg, expected=PressureCommand).as_dict(),
+            self.params['max_chamber_pressure_pa'])
         for name, pressure in command.items():
             self.command[CHAMBERS.index(name)] = pressure
         self.last_command_time = time.monotonic()

@@ -13,6 +13,10 @@ the node keeps running either way (`inflarm_msgs_json.ros.problems`). Subscripti
 incompatible QoS offers, which otherwise drop every message silently.
 """
 
+import functools
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
 from inflarm_msgs_json.ros.problems import ProblemReporter
 from inflarm_msgs_json.ros.qos import subscription_events
 
@@ -23,6 +27,12 @@ class GuardedCallbacks:
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.problems = ProblemReporter(self.get_logger())
+        # rclpy's lifecycle services raise RCLError on a request for a transition the state
+        # machine does not have (any ros2 lifecycle set typo): answered with the reason instead.
+        for service in self.services:
+            if service.srv_type.__module__.startswith('lifecycle_msgs'):
+                service.callback = self.problems.guard_service(
+                    service.srv_name, _transition_request(service.callback))
 
     def create_guarded_subscription(self, msg_type, topic: str, callback, qos, **kwargs):
         """``create_subscription`` whose callback is guarded under the topic's name."""
@@ -40,3 +50,14 @@ class GuardedCallbacks:
         """``create_service``; a rejected request is answered with the reason."""
         return self.create_service(srv_type, name, self.problems.guard_service(name, callback),
                                    **kwargs)
+
+
+def _transition_request(callback):
+    """A lifecycle service callback whose unknown transition is a rejected request."""
+    @functools.wraps(callback)
+    def call(request, response):
+        try:
+            return callback(request, response)
+        except _rclpy.RCLError as error:
+            raise ValueError(str(error).split(', at ')[0]) from error
+    return call
