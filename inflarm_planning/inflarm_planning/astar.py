@@ -133,26 +133,38 @@ def _endpoint(point: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
     return p
 
 
-def _blocked(space: FreeSpace, points: np.ndarray) -> np.ndarray:
-    """Eq. (5) at ``points`` (M, 3): read from the free grid where they are grid points."""
-    lattice = space.lattice
-    nearest = lattice.nearest_index(points)
-    on_grid = (np.linalg.norm(lattice.points(nearest) - points, axis=1) < 1e-9) \
-        & lattice.contains(nearest)
-    blocked = np.empty(len(points), dtype=bool)
-    blocked[on_grid] = ~space.is_free(nearest[on_grid])
-    if not np.all(on_grid):
-        blocked[~on_grid] = arm_collides(points[~on_grid], space.boxes)
-    return blocked
+def _outside(point: np.ndarray, workspace: Workspace) -> bool:
+    x, y, z = (float(v) for v in point)
+    return not (abs(x) <= workspace.x_max and abs(y) <= workspace.y_max
+                and workspace.z_min <= z <= workspace.z_max)
 
 
-def _snap(space: FreeSpace, point: np.ndarray, name: str, reason: str) -> np.ndarray:
-    """Nearest free grid point of the cell around ``point`` reachable from it in a line."""
+def _grid_cell(space: FreeSpace, point: np.ndarray, name: str, reason: str) -> np.ndarray:
+    """The grid point a path leaves from or arrives at, for an end point ``point`` (3,).
+
+    ``point`` itself if it is a free grid point; otherwise the nearest free corner of the grid
+    cell around it that the end reaches in a straight line without collision.
+
+    Raises
+    ------
+    NoPathError
+        If the arm with its end at ``point`` collides (eq. (5)), or no corner is in reach.
+    """
     lattice = space.lattice
-    nearest = lattice.nearest_index(point)
-    if np.linalg.norm(lattice.points(nearest) - point) < 1e-9 and space.is_free(nearest):
-        return nearest  # on a free grid point
-    low = np.floor(point / lattice.resolution + 1e-9).astype(np.int64) - np.array(lattice.first)
+    r = lattice.resolution
+    index = [round(float(v) / r) - f for v, f in zip(point, lattice.first, strict=True)]
+    on_grid = all(abs((i + f) * r - float(v)) < 1e-9 and 0 <= i < n for i, f, v, n in
+                  zip(index, lattice.first, point, lattice.shape, strict=True))
+    if on_grid:
+        if space.free[tuple(index)]:
+            return np.array(index, dtype=np.int64)
+        blocked = True
+    else:
+        blocked = bool(arm_collides(point, space.boxes))
+    if blocked:
+        why = describe_collision(point, space.obstacles, space.alert_margin)
+        raise NoPathError(f'{name} {np.round(point, 4).tolist()} m is not free: {why}', reason)
+    low = np.floor(point / r + 1e-9).astype(np.int64) - np.array(lattice.first)
     corners = np.unique(np.array([low + np.array(c) for c in itertools.product((0, 1), repeat=3)]),
                         axis=0)
     corners = corners[space.is_free(corners)]
@@ -162,18 +174,23 @@ def _snap(space: FreeSpace, point: np.ndarray, name: str, reason: str) -> np.nda
     if not len(corners):
         raise NoPathError(
             f'{name} {np.round(point, 4).tolist()} m has no free grid point in reach at '
-            f'resolution {lattice.resolution:g} m (it is too close to an alert region); use a '
-            f'finer resolution', reason)
+            f'resolution {r:g} m (it is too close to an alert region); use a finer resolution',
+            reason)
     distance = np.linalg.norm(lattice.points(corners) - point, axis=1)
     return corners[np.argmin(distance)]
 
 
-def _free_cost(delta: np.ndarray, step_cost: np.ndarray) -> float:
+_KIND = np.abs(MOVES).sum(axis=1)  # 1: along an axis, 2: in a plane, 3: across a cube
+FREE_COSTS = {name: tuple(float(cost[np.argmax(np.equal(_KIND, kind))]) for kind in (1, 2, 3))
+              for name, cost in COSTS.items()}
+"""Cost of a step along an axis, in a plane and across a cube [cells], per cost."""
+
+
+def _free_cost(delta: np.ndarray, cost: str) -> float:
     """Cost of the cheapest obstacle-free grid path over ``delta`` cells."""
-    a, b, c = sorted(np.abs(delta).tolist(), reverse=True)
-    by_kind = {int(k): float(v) for k, v in zip(np.abs(MOVES).sum(axis=1), step_cost,
-                                                strict=True)}
-    return c * by_kind[3] + (b - c) * by_kind[2] + (a - b) * by_kind[1]
+    a, b, c = sorted((abs(int(v)) for v in delta), reverse=True)
+    one, two, three = FREE_COSTS[cost]
+    return c * three + (b - c) * two + (a - b) * one
 
 
 def _ellipsoid_box(start: np.ndarray, goal: np.ndarray, bound: float, shape: np.ndarray
@@ -193,10 +210,11 @@ def _ellipsoid_box(start: np.ndarray, goal: np.ndarray, bound: float, shape: np.
     return np.array(low), np.array(high)
 
 
-def _search(space: FreeSpace, start: np.ndarray, goal: np.ndarray, step_cost: np.ndarray
+def _search(space: FreeSpace, start: np.ndarray, goal: np.ndarray, cost: str
             ) -> tuple[GridPath, int]:
     shape = np.array(space.lattice.shape)
-    bound = INITIAL_BOUND * _free_cost(goal - start, step_cost)
+    step_cost = COSTS[cost]
+    bound = INITIAL_BOUND * _free_cost(goal - start, cost)
     expanded, searches = 0, 0
     while True:
         low, high = _ellipsoid_box(start, goal, bound, shape)
@@ -253,24 +271,18 @@ def plan(
     space = free_space(cuboids, resolution, margin, workspace, max_cells)
     started = time.perf_counter()
     for name, point in (('start', start), ('goal', goal)):
-        try:
-            check_in_workspace(point, workspace, name)
-        except ValueError as err:
-            raise NoPathError(str(err), 'outside_workspace') from None
-    blocked = _blocked(space, np.array([start, goal]))
-    for name, point, reason, hit in (('start', start, 'start_blocked', blocked[0]),
-                                     ('goal', goal, 'goal_blocked', blocked[1])):
-        if hit:
-            why = describe_collision(point, cuboids, margin)
-            raise NoPathError(f'{name} {np.round(point, 4).tolist()} m is not free: {why}',
-                              reason)
-    first = _snap(space, start, 'start', 'start_blocked')
-    last = _snap(space, goal, 'goal', 'goal_blocked')
+        if _outside(point, workspace):
+            try:
+                check_in_workspace(point, workspace, name)  # says which bound
+            except ValueError as err:
+                raise NoPathError(str(err), 'outside_workspace') from None
+    first = _grid_cell(space, start, 'start', 'start_blocked')
+    last = _grid_cell(space, goal, 'goal', 'goal_blocked')
     if np.array_equal(first, last):
         grid = GridPath(first[None, :], 0.0, 0)
         searches = 0
     else:
-        grid, searches = _search(space, first, last, COSTS[cost])
+        grid, searches = _search(space, first, last, cost)
     if not grid.found:
         raise NoPathError(
             f'no connection from start {np.round(start, 4).tolist()} m to goal '

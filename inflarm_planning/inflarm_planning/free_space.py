@@ -239,8 +239,7 @@ def free_space(
     cuboids = as_cuboids(obstacles)
     margin = check_margin(alert_margin)
     r = check_resolution(resolution)
-    check_grid(cuboids, r, margin, workspace, max_cells)  # errors are not cached
-    return _cached(cuboids, r, margin, workspace, int(max_cells))
+    return _cached(cuboids, r, margin, workspace, int(max_cells))  # a build error is not cached
 
 
 def clear_cache() -> None:
