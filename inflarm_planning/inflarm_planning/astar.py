@@ -21,7 +21,7 @@ Costs (``cost=``):
 
 The search is exact for its cost but looks only where it has to: with an upper bound ``C`` of
 the path cost, every cell the search expands has ``|n - start| + |n - goal| <= C`` (an
-ellipsoid), so it runs on the grid cropped to that ellipsoid's bounding box, starting from 1.25
+ellipsoid), so it runs on the grid cropped to that ellipsoid's bounding box, starting from 1.5
 times the obstacle-free cost and widening to the cost it finds (or doubling when it finds none)
 until the crop is known to contain the optimum. Steps do not cut corners (see
 `inflarm_planning.grid_search.GUARD_OFFSETS`): with every alert region at least a cell wide
