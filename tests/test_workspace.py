@@ -44,6 +44,17 @@ def test_every_declared_executable_resolves_like_ros2_run(package):
         assert callable(getattr(importlib.import_module(module), function))
 
 
+@pytest.mark.parametrize('package', PACKAGES)
+def test_node_executables_own_the_stop_signals_before_they_import_their_node(package):
+    # A console script pointing into nodes/ would import rclpy & co. before any handler exists.
+    for executable, module, function in console_scripts(package):
+        assert '.nodes' not in module, (
+            f'{package} {executable}: register it in {package}.executables (node_entry)')
+        if module == f'{package}.executables':
+            entry = getattr(importlib.import_module(module), function)
+            assert entry.__doc__.startswith(f'Run {package}.nodes.{executable}.main()')
+
+
 def test_the_ros2_runner_runs_an_executable_and_reports_unknown_ones():
     runner = REPO_ROOT / 'scripts' / 'ros2'
     listed = subprocess.run([runner, 'pkg', 'executables', 'inflarm_hw'], capture_output=True,
