@@ -21,7 +21,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'path_planner = inflarm_planning.nodes.path_planner:main',
+            'path_planner = inflarm_planning.executables:path_planner',
             'inflarm-plan-figures = inflarm_planning.plan_figures:main',
         ],
     },

@@ -58,6 +58,8 @@ from inflarm_msgs_json import (
     encode,
 )
 from inflarm_msgs_json.ros.conversions import to_string_msg
+from inflarm_planning.nodes.path_planner import PathPlanner
+from inflarm_planning.scenario import GOAL, OBSTACLE, START
 
 ARM = FlexibleArm()
 LOAD = np.array([0.0, 10.0, -15.0])
@@ -258,6 +260,15 @@ NODES = {
                          lambda n, out: len(n.waypoints) == 1)}),
     'trial_runner': NodeCase(TrialRunner, valid={
         'trial_report': (lambda n: _report(n), lambda n, out: n.trial == 1)}),
+    'path_planner': NodeCase(PathPlanner, valid={
+        'obstacles': (
+            lambda n: to_string_msg(ObstacleSet('sra_mount', 0.03, (OBSTACLE.to_message(),))),
+            lambda n, out: n.model.obstacles == (OBSTACLE,)),
+        'plan_request': (
+            lambda n: to_string_msg(PlanRequest('sra_mount', START, GOAL, 0.01)),
+            lambda n, out: n.last_request is not None and n.last_request.resolution == 0.01),
+        'ball_position': (lambda n: point(0.0, 0.12, 0.71, 'sra_mount'),
+                          lambda n, out: n.position == (0.0, 0.12, 0.71))}),
     'joint_state_monitor': NodeCase(JointStateMonitor, valid={
         'joint_states': (lambda n: JointState(name=['joint_1'], position=[0.1]),
                          lambda n, out: n.latest is not None)}),

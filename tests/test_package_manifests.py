@@ -22,6 +22,8 @@ ROSDEP_KEYS = {
     'pinocchio': 'pinocchio',
     'cv2': 'python3-opencv',
     'matplotlib': 'python3-matplotlib',
+    'mpl_toolkits': 'python3-matplotlib',  # ships with matplotlib
+    'numba': 'python3-numba',
     'tqdm': 'python3-tqdm',
     'yaml': 'python3-yaml',
     'rosbags': 'python3-rosbags-pip',

@@ -25,6 +25,9 @@ MAX_CELLS = 120_000_000
 (the free grid, the search's path costs, parents and closed set), so ~1.3 GB; the positive work
 space at 1 mm has 68.4 million points."""
 
+MAX_AXIS_POINTS = 1e7
+"""Beyond this many points along an axis a resolution is refused before any count is made."""
+
 BUILD_CHUNK = 1 << 20
 """Grid points tested per vectorized batch while building."""
 
@@ -67,9 +70,21 @@ class Lattice:
         r = check_resolution(resolution)
         low = (-workspace.x_max, -workspace.y_max, workspace.z_min)
         high = (workspace.x_max, workspace.y_max, workspace.z_max)
+        if any(not (abs(v) / r < MAX_AXIS_POINTS) for v in low + high):
+            raise ValueError(f'resolution {r:g} m is too fine for memory: more than '
+                             f'{MAX_AXIS_POINTS:g} grid points along an axis')
         eps = 1e-9  # points on a bound (the paper's millimetres) belong to the grid
-        first = tuple(math.ceil(v / r - eps) for v in low)
-        last = tuple(math.floor(v / r + eps) for v in high)
+
+        def first_in(v: float) -> int:
+            i = math.ceil(v / r - eps)
+            return i if i * r >= v - 1e-12 else i + 1
+
+        def last_in(v: float) -> int:
+            i = math.floor(v / r + eps)
+            return i if i * r <= v + 1e-12 else i - 1
+
+        first = tuple(first_in(v) for v in low)
+        last = tuple(last_in(v) for v in high)
         shape = tuple(max(b - a + 1, 0) for a, b in zip(first, last, strict=True))
         return cls(r, first, shape)
 

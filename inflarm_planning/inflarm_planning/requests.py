@@ -10,11 +10,17 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from inflarm_model.soft_arm import Workspace
+from inflarm_model.soft_arm import WORKSPACE_POSITIVE, Workspace
 import inflarm_msgs_json
 from inflarm_planning.astar import COSTS
 from inflarm_planning.collision import Cuboid, as_cuboids, check_margin
 from inflarm_planning.free_space import Lattice, check_resolution
+
+MAX_COORDINATE = 1000.0
+"""[m] An obstacle corner farther than this from the mount is not a measurement of anything."""
+
+MAX_ALERT_MARGIN = 1.0
+"""[m] An alert margin above this would cover the whole work space (404 mm across)."""
 
 
 @dataclass(frozen=True)
@@ -85,7 +91,15 @@ def obstacle_model(
     check_frame(message.frame_id, frame_id, 'obstacles')
     minimum = check_margin(min_alert_margin, 'min_alert_margin')
     requested = check_margin(message.alert_margin)
-    return ObstacleModel(as_cuboids(message), max(requested, minimum), requested)
+    if requested > MAX_ALERT_MARGIN:
+        raise ValueError(f'obstacles: alert_margin {requested:g} m is above '
+                         f'{MAX_ALERT_MARGIN:g} m (it would cover the whole work space)')
+    boxes = as_cuboids(message)
+    for k, box in enumerate(boxes):
+        if np.max(np.abs(box.bounds)) > MAX_COORDINATE:
+            raise ValueError(f'obstacles[{k}]: a corner is more than {MAX_COORDINATE:g} m from '
+                             f'the mount: {box.bounds.tolist()}')
+    return ObstacleModel(boxes, max(requested, minimum), requested)
 
 
 def _point(value: npt.ArrayLike, name: str) -> tuple[float, float, float]:
@@ -97,7 +111,8 @@ def _point(value: npt.ArrayLike, name: str) -> tuple[float, float, float]:
 
 def plan_query(
     start: npt.ArrayLike, goal: npt.ArrayLike, resolution: float, frames: tuple[str, ...],
-    frame_id: str,
+    frame_id: str, max_cells: int, workspace: Workspace = WORKSPACE_POSITIVE,
+    limit: str = 'for memory',
 ) -> PlanQuery:
     """Check a plan request's end points, frames and resolution.
 
@@ -111,6 +126,12 @@ def plan_query(
         The frames the request gives (one for a PlanRequest, start's and goal's for GetPlan).
     frame_id : str
         The planner's frame.
+    max_cells : int
+        Largest grid accepted.
+    workspace : Workspace
+        Bounds of the grid.
+    limit : str
+        Why ``max_cells`` is the limit, for the message (``'for memory'``).
 
     Returns
     -------
@@ -122,7 +143,14 @@ def plan_query(
     p_goal = _point(goal, 'goal')
     if p_start == p_goal:
         raise ValueError(f'plan request: start and goal are the same point {list(p_start)}')
-    return PlanQuery(p_start, p_goal, check_resolution(resolution))
+    lattice = Lattice.over(workspace, check_resolution(resolution))
+    if lattice.size > max_cells:
+        finest = (lattice.size / max_cells) ** (1.0 / 3.0) * lattice.resolution
+        raise ValueError(
+            f'resolution {lattice.resolution:g} m is too fine {limit}: {lattice.size:.3g} grid '
+            f'points, more than {max_cells:.3g}; use resolution >= '
+            f'{math.ceil(finest * 1e5) / 1e5:g} m')
+    return PlanQuery(p_start, p_goal, lattice.resolution)
 
 
 def check_cost(cost: str) -> str:
@@ -130,15 +158,3 @@ def check_cost(cost: str) -> str:
     if cost not in COSTS:
         raise ValueError(f"cost: expected one of {sorted(COSTS)}, got '{cost}'")
     return cost
-
-
-def check_inline(resolution: float, workspace: Workspace, max_cells: int) -> None:
-    """Raise if a grid of ``resolution`` is too large to be planned inside a service callback."""
-    lattice = Lattice.over(workspace, check_resolution(resolution))
-    if lattice.size > max_cells:
-        finest = (lattice.size / max_cells) ** (1.0 / 3.0) * lattice.resolution
-        raise ValueError(
-            f'resolution {resolution:g} m is too fine for the plan service ({lattice.size:.3g} '
-            f'grid points > service.max_cells {max_cells:.3g}: it would block the node); use '
-            f'resolution >= {math.ceil(finest * 1e4) / 1e4:g} m or publish a PlanRequest on '
-            f'plan_request, which plans in the background')

@@ -56,7 +56,7 @@ def _cube(ns: str, index: int, low: np.ndarray, high: np.ndarray, color: ColorRG
     marker = Marker(ns=ns, id=index, type=Marker.CUBE, action=Marker.ADD, color=color)
     marker.header.frame_id = frame_id
     marker.header.stamp = stamp
-    centre = (low + high) / 2.0
+    centre = low / 2.0 + high / 2.0
     size = np.maximum(high - low, FLAT)
     marker.pose.position.x, marker.pose.position.y, marker.pose.position.z = (
         float(v) for v in centre)

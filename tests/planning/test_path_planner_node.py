@@ -16,6 +16,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from inflarm_msgs_json import ObstacleSet, PlanOutcome, PlanRequest, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+from inflarm_planning.astar import Cuboid
 from inflarm_planning.nodes.path_planner import PathPlanner
 from inflarm_planning.scenario import ALERT_MARGIN, GOAL, OBSTACLE, START
 from planning_reference import violations
@@ -154,40 +155,52 @@ def test_a_failed_plan_publishes_no_path_and_says_why(executor):
 
 def test_bad_input_is_rejected_and_the_node_keeps_running(executor):
     rig = Rig(executor)
+    node = rig.planner
     rig.obstacles()
-    assert spin_until(executor, lambda: len(rig.planner.model.obstacles) == 1)
-    model = rig.planner.model
+    assert spin_until(executor, lambda: len(node.model.obstacles) == 1)
+    model = node.model
     degenerate = json.loads(to_string_msg(ObstacleSet(FRAME, 0.01,
                                                       (OBSTACLE.to_message(),))).data)
     degenerate['obstacles'][0]['min'][0] = 0.5  # min > max
-    nan_margin = to_string_msg(ObstacleSet(FRAME, 0.01, ())).data.replace('0.01', 'NaN')
-    wrong_frame = to_string_msg(ObstacleSet('world', 0.01, ()))
-    # straight into the callback (a latched topic of depth 1 would keep only the last one)
-    for text in (json.dumps(degenerate), nan_margin, wrong_frame.data):
-        rig.planner.on_obstacles(String(data=text))
-        assert rig.planner.model is model  # refused: the obstacles are unchanged
-    rig.obstacle_pub.publish(wrong_frame)
-    rig.spin(0.3)
-    assert rig.planner.model is model
+    far = ObstacleSet(FRAME, 0.01, (Cuboid((0, 0, 0.7), (1e4, 0.1, 0.8)).to_message(),))
+    bad_obstacles = [
+        (json.dumps(degenerate), 'expected min <= max'),
+        (to_string_msg(ObstacleSet(FRAME, 0.01, ())).data.replace('0.01', 'NaN'), 'NaN'),
+        (to_string_msg(ObstacleSet('world', 0.01, ())).data, "frame_id 'world'"),
+        (to_string_msg(ObstacleSet(FRAME, 5.0, ())).data, 'alert_margin 5 m is above'),
+        (to_string_msg(far).data, 'more than 1000 m from the mount'),
+    ]
+    # straight into the subscription's (guarded) callback: a latched topic of depth 1 would
+    # keep only the last of several quick messages
+    callback = next(s for s in node.subscriptions if s.topic_name == '/obstacles').callback
+    for n, (text, expected) in enumerate(bad_obstacles, start=1):
+        callback(String(data=text))
+        assert node.problems.counts['obstacles'] == n
+        assert expected in node.problems.last['obstacles'], node.problems.last['obstacles']
+        assert node.model is model  # refused: the obstacles are unchanged
 
     bad_requests = [
-        String(data='{"type":"PlanRequest","schema_version":1,"frame_id":"sra_mount",'
-                    '"start":[0,0.13,NaN],"goal":[0.13,0,0.73],"resolution":0.01}'),
-        to_string_msg(PlanRequest('world', START, GOAL, 0.01)),
-        to_string_msg(PlanRequest(FRAME, START, START, 0.01)),
-        to_string_msg(PlanRequest(FRAME, START, GOAL, 0.0005)),
-        String(data='{"type":"PlanRequest","schema_version":1,"frame_id":"sra_mount",'
-                    '"start":[0,0.13,0.71],"goal":[0.13,0,0.73],"resolution":0}'),
+        ('{"type":"PlanRequest","schema_version":1,"frame_id":"sra_mount",'
+         '"start":[0,0.13,NaN],"goal":[0.13,0,0.73],"resolution":0.01}', 'NaN'),
+        (to_string_msg(PlanRequest('world', START, GOAL, 0.01)).data,
+         "frame_id 'world' is not 'sra_mount'"),
+        (to_string_msg(PlanRequest(FRAME, START, START, 0.01)).data,
+         'start and goal are the same point'),
+        (to_string_msg(PlanRequest(FRAME, START, GOAL, 0.0005)).data,
+         'too fine for memory: 5.45e+08 grid points'),
+        (to_string_msg(PlanRequest(FRAME, START, GOAL, 1e-300)).data, 'too fine for memory'),
+        ('{"type":"PlanRequest","schema_version":1,"frame_id":"sra_mount",'
+         '"start":[0,0.13,0.71],"goal":[0.13,0,0.73],"resolution":0}', 'PlanRequest.resolution'),
     ]
-    expected = ['NaN is not a JSON number', "frame_id 'world' is not 'sra_mount'",
-                'start and goal are the same point', 'too fine for memory',
-                'PlanRequest.resolution']
-    for n, (message, text) in enumerate(zip(bad_requests, expected, strict=True), start=1):
-        rig.request_pub.publish(message)
-        outcome = rig.wait_outcomes(n)
-        assert outcome.status == 'rejected' and text in outcome.message, outcome.message
+    for n, (text, expected) in enumerate(bad_requests, start=1):
+        rig.request_pub.publish(String(data=text))
+        assert spin_until(executor, lambda n=n: node.problems.counts.get('plan_request') == n)
+        assert expected in node.problems.last['plan_request'], node.problems.last['plan_request']
+    assert node.problems.unexpected == 0
+    rig.spin(0.2)
+    assert rig.outcomes == [] and rig.paths == []
     rig.request()
-    assert rig.wait_outcomes(len(expected) + 1).status == 'planned'
+    assert rig.wait_outcomes(1).status == 'planned'
     assert spin_until(executor, lambda: len(rig.paths) == 1)
 
 
@@ -251,9 +264,12 @@ def test_ball_positions_in_another_frame_are_not_used(executor):
     ball = PointStamped()
     ball.header.frame_id = 'camera'
     ball.point.x, ball.point.y, ball.point.z = (0.0, 0.12, 0.71)
-    rig.ball_pub.publish(ball)
-    rig.spin(0.3)
+    pub_count = rig.ball_pub
+    assert spin_until(executor, lambda: (pub_count.publish(ball),
+                                         rig.planner.problems.counts.get('ball_position'))[1])
+    assert "frame_id 'camera' is not 'sra_mount'" in rig.planner.problems.last['ball_position']
     assert rig.planner.position is None
     response = rig.call(START, GOAL, frame_id='')  # GetPlan poses without a frame
     assert response.plan.poses == []
-    assert rig.wait_outcomes(1).status == 'rejected'
+    outcome = rig.wait_outcomes(1)
+    assert outcome.status == 'rejected' and "frame_id '' is not 'sra_mount'" in outcome.message

@@ -40,8 +40,8 @@ Parameters:
 """
 
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+import math
 import threading
 import time
 
@@ -53,17 +53,12 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from inflarm_model.soft_arm import WORKSPACE_POSITIVE
-from inflarm_msgs_json import MessageError, ObstacleSet, PlanOutcome, PlanRequest
+from inflarm_msgs_json import ObstacleSet, PlanOutcome, PlanRequest
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import (
-    LATCHED_QOS,
-    RELIABLE_QOS,
-    SENSOR_QOS,
-    publisher_events,
-    subscription_events,
-)
+from inflarm_msgs_json.ros.problems import InputError
+from inflarm_msgs_json.ros.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 from inflarm_planning.astar import NoPathError
 from inflarm_planning.collision import CHECK_STEP
@@ -72,7 +67,7 @@ from inflarm_planning.requests import (
     ObstacleModel,
     PlanQuery,
     check_cost,
-    check_inline,
+    check_frame,
     obstacle_model,
     plan_query,
 )
@@ -116,6 +111,10 @@ PARAMETERS = (
 )
 
 
+STOP_WAIT_S = 0.5
+"""How long ``destroy_node`` waits for a plan under way before leaving it to finish alone."""
+
+
 @dataclass(frozen=True)
 class Job:
     """One plan to make: a request against an obstacle model."""
@@ -135,7 +134,7 @@ class Result:
     outcome: PlanOutcome
 
 
-class PathPlanner(Node):
+class PathPlanner(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('path_planner', **kwargs)
@@ -147,15 +146,16 @@ class PathPlanner(Node):
         self.last_source = ''
         self.last_path = None  # points of the last published path, for the markers
         self.position: tuple[float, float, float] | None = None
-        self.position_time = -float('inf')
+        self.position_time_ns = 0
+        self.last_request: PlanQuery | None = None  # accepted from the topic
 
         self._lock = threading.Lock()
         self._next_job: Job | None = None
         self._busy = False
         self._closing = False
         self._results: deque[Result] = deque()
-        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='path_planner')
-        self._done = self.create_guard_condition(self.on_results)
+        self._worker: threading.Thread | None = None
+        self._done = self.create_guard_condition(self.problems.guard('results', self.on_results))
 
         self.path_pub = self.create_publisher(
             Path, 'planned_path', LATCHED_QOS, event_callbacks=publisher_events(
@@ -166,16 +166,12 @@ class PathPlanner(Node):
         self.outcome_pub = self.create_publisher(
             String, '~/plan_outcome', LATCHED_QOS, event_callbacks=publisher_events(
                 self, '~/plan_outcome'))
-        self.create_subscription(
-            String, 'obstacles', self.on_obstacles, LATCHED_QOS,
-            event_callbacks=subscription_events(self, 'obstacles'))
-        self.create_subscription(
-            String, 'plan_request', self.on_plan_request, RELIABLE_QOS,
-            event_callbacks=subscription_events(self, 'plan_request'))
-        self.create_subscription(
-            PointStamped, 'ball_position', self.on_ball_position, SENSOR_QOS,
-            event_callbacks=subscription_events(self, 'ball_position'))
-        self.create_service(GetPlan, '~/plan', self.on_plan_service)
+        self.create_guarded_subscription(String, 'obstacles', self.on_obstacles, LATCHED_QOS)
+        self.create_guarded_subscription(String, 'plan_request', self.on_plan_request,
+                                         RELIABLE_QOS)
+        self.create_guarded_subscription(PointStamped, 'ball_position', self.on_ball_position,
+                                         SENSOR_QOS)
+        self.create_guarded_service(GetPlan, '~/plan', self.on_plan_service)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
@@ -200,49 +196,43 @@ class PathPlanner(Node):
     # -- inputs ----------------------------------------------------------------------------------
 
     def on_obstacles(self, msg: String) -> None:
-        try:
-            model = obstacle_model(from_string_msg(msg, expected=ObstacleSet), self.frame_id,
-                                   self.params['min_alert_margin_m'])
-        except (MessageError, ValueError) as err:
-            self.get_logger().error(f'obstacles rejected (the previous ones are kept): {err}')
-            return
+        model = obstacle_model(from_string_msg(msg, expected=ObstacleSet), self.frame_id,
+                               self.params['min_alert_margin_m'])  # else the old ones stay
         if model.raised:
             self.get_logger().warning(
                 f'obstacles: alert margin {model.requested_margin:.3f} m raised to '
                 f'{model.alert_margin:.3f} m (min_alert_margin_m: half the actuator width + '
-                f'tracking error)')
+                f'tracking error)', throttle_duration_sec=2.0)
         self.model = model
         self.get_logger().info(
-            f'{len(model.obstacles)} obstacles, alert margin {model.alert_margin:.3f} m')
+            f'{len(model.obstacles)} obstacles, alert margin {model.alert_margin:.3f} m',
+            throttle_duration_sec=1.0)
         self.publish_markers()
         if self.last_query is not None:
             self.submit(self.job(self.replan_query(self.last_query), 'replan'))
 
     def on_ball_position(self, msg: PointStamped) -> None:
+        check_frame(msg.header.frame_id, self.frame_id, 'ball_position')
         point = (msg.point.x, msg.point.y, msg.point.z)
-        if msg.header.frame_id == self.frame_id and all(abs(v) < float('inf') for v in point):
-            self.position = point
-            self.position_time = time.monotonic()
+        if not all(math.isfinite(v) for v in point):
+            raise InputError('non-finite', f'ball_position: expected finite coordinates [m], '
+                                           f'got {list(point)}')
+        self.position = point
+        self.position_time_ns = self.get_clock().now().nanoseconds
 
     def replan_query(self, query: PlanQuery) -> PlanQuery:
         """The last request's goal, from the measured end point when it is fresh."""
-        fresh = time.monotonic() - self.position_time <= self.params['replan.position_timeout_s']
-        if not fresh or self.position == query.goal:
+        age_s = (self.get_clock().now().nanoseconds - self.position_time_ns) * 1e-9
+        if self.position is None or age_s > self.params['replan.position_timeout_s'] \
+                or self.position == query.goal:
             return query
         return PlanQuery(self.position, query.goal, query.resolution)
 
     def on_plan_request(self, msg: String) -> None:
-        try:
-            request = from_string_msg(msg, expected=PlanRequest)
-        except MessageError as err:
-            self.reject(f'plan_request rejected: {err}')
-            return
-        try:
-            query = plan_query(request.start, request.goal, request.resolution,
-                               (request.frame_id,), self.frame_id)
-        except ValueError as err:
-            self.reject(f'plan_request rejected: {err}', request.start, request.goal)
-            return
+        request = from_string_msg(msg, expected=PlanRequest)
+        query = plan_query(request.start, request.goal, request.resolution,
+                           (request.frame_id,), self.frame_id, self.params['max_cells'])
+        self.last_request = query
         self.submit(self.job(query, 'plan_request'))
 
     def on_plan_service(self, request: GetPlan.Request, response: GetPlan.Response):
@@ -251,21 +241,22 @@ class PathPlanner(Node):
         try:
             query = plan_query(
                 start, goal, self.params['service.resolution_m'],
-                (request.start.header.frame_id, request.goal.header.frame_id), self.frame_id)
-            check_inline(query.resolution, WORKSPACE_POSITIVE, self.params['service.max_cells'])
+                (request.start.header.frame_id, request.goal.header.frame_id), self.frame_id,
+                min(self.params['service.max_cells'], self.params['max_cells']),
+                limit='for the plan service (it plans in its callback, blocking the node: '
+                      'publish a PlanRequest on plan_request, planned in the background)')
         except ValueError as err:
-            self.reject(f'~/plan rejected: {err}', start, goal)
-            return response
+            # GetPlan has no status field: the reason goes on ~/plan_outcome, then the guard
+            # logs the rejection and the answer is the Path without poses
+            self.outcome_pub.publish(to_string_msg(PlanOutcome(
+                status='rejected', reason='', message=f'~/plan rejected: {err}',
+                start=_finite(start), goal=_finite(goal), waypoints=0, length=0.0,
+                duration=0.0, planning_time=0.0)))
+            raise
         path = self.publish_result(self.run(self.job(query, 'service')))
         if path is not None:
             response.plan = path
         return response
-
-    def reject(self, text: str, start=(0.0, 0.0, 0.0), goal=(0.0, 0.0, 0.0)) -> None:
-        self.get_logger().error(text)
-        self.outcome_pub.publish(to_string_msg(PlanOutcome(
-            status='rejected', reason='', message=text, start=_finite(start), goal=_finite(goal),
-            waypoints=0, length=0.0, duration=0.0, planning_time=0.0)))
 
     def job(self, query: PlanQuery, source: str) -> Job:
         return Job(query, self.model, source, dict(self.params))
@@ -284,7 +275,11 @@ class PathPlanner(Node):
         if replaced:
             self.get_logger().info('a newer request replaces the one waiting')
         if start:
-            self._worker.submit(self._work)
+            # a daemon: a stop during a long plan (a 1 mm grid build takes seconds) is not held
+            # up by it; after a stop it finishes its plan and publishes nothing
+            self._worker = threading.Thread(target=self._work, name='path_planner worker',
+                                            daemon=True)
+            self._worker.start()
 
     def _work(self) -> None:
         while True:
@@ -318,6 +313,9 @@ class PathPlanner(Node):
             status, reason, message = 'no_path', err.reason, f'no path: {err}'
         except ValueError as err:
             status, message = 'rejected', f'plan request rejected: {err}'
+        except Exception as err:  # noqa: BLE001 (a bug must not stop the worker for good)
+            self.problems.bug(job.source, err)
+            status, message = 'rejected', f'internal error: {type(err).__name__}: {err}'
         elapsed = time.perf_counter() - started
         if planned is None:
             return Result(job, None, PlanOutcome(
@@ -373,7 +371,8 @@ class PathPlanner(Node):
         with self._lock:
             self._closing = True
             self._next_job = None
-        self._worker.shutdown(wait=True, cancel_futures=True)  # at most the plan under way
+        if self._worker is not None:
+            self._worker.join(timeout=STOP_WAIT_S)  # a short plan under way may still finish
         super().destroy_node()
 
 
