@@ -18,6 +18,7 @@ from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
 from inflarm_planning.astar import Cuboid
 from inflarm_planning.nodes.path_planner import PathPlanner
+from inflarm_planning.requests import PlanQuery
 from inflarm_planning.scenario import ALERT_MARGIN, GOAL, OBSTACLE, START
 from planning_reference import violations
 from ros_harness import spin_until
@@ -273,3 +274,20 @@ def test_ball_positions_in_another_frame_are_not_used(executor):
     assert response.plan.poses == []
     outcome = rig.wait_outcomes(1)
     assert outcome.status == 'rejected' and "frame_id '' is not 'sra_mount'" in outcome.message
+
+
+def test_a_plan_for_replaced_obstacles_is_dropped_for_the_replan(executor):
+    rig = Rig(executor)
+    node = rig.planner
+    stale = node.run(node.job(PlanQuery(START, GOAL, 0.01), 'plan_request'))  # no obstacles
+    assert stale.outcome.status == 'planned'
+    assert violations(stale.planned.trajectory.points, [OBSTACLE.bounds], 0.0) != []
+    rig.obstacles()  # the replan of the last request starts
+    assert spin_until(executor, lambda: len(node.model.obstacles) == 1)
+    assert node.publish_result(stale) is None  # computed for the old obstacles: not published
+    outcome = rig.wait_outcomes(1)
+    assert outcome.status == 'planned'
+    assert spin_until(executor, lambda: len(rig.paths) == 1)
+    assert violations(points_of(rig.paths[0]), [OBSTACLE.bounds], ALERT_MARGIN) == []
+    rig.spin(0.2)
+    assert len(rig.paths) == 1 and len(rig.outcomes) == 1

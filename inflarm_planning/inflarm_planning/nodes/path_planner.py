@@ -5,14 +5,17 @@ against the latest obstacles: A* on the work-space grid, then shortcut, smoothed
 ``trajectory.max_step_m`` and timed. The path is published latched for the pressure controller
 (which follows it waypoint by waypoint), with markers of the scene. When the obstacles change,
 the last request's goal is planned again, from the measured end point if one is fresh (else from
-the request's start). A request that cannot be planned publishes no path: it is logged and its
-PlanOutcome says why (the NoPathError or validation text).
+the request's start). A plan that finds no path publishes none; its PlanOutcome gives the
+NoPathError's reason and text. Invalid input (``ValueError`` from ``inflarm_planning.requests``
+and the message decoder) is rejected by the node's guards with a warning, and nothing is
+published; the service also answers it with a Path without poses and a ``rejected`` outcome.
 
-Threads: requests from the ``plan_request`` topic and replans are planned on one worker thread
-(the latest pending request wins; numba's A* kernel runs without the GIL), so the executor keeps
-spinning whatever the resolution; the results are published from the executor thread. The
-``~/plan`` service plans inside its callback, which blocks the executor for the plan's duration,
-so it refuses grids larger than ``service.max_cells`` (default: 2 mm and coarser).
+Threads: requests from the ``plan_request`` topic and replans are planned on one daemon worker
+thread (the latest pending request wins; numba's A* kernel runs without the GIL), so the executor
+keeps spinning whatever the resolution; the results are published from the executor thread; a
+stop waits at most ``STOP_WAIT_S`` for a plan under way. The ``~/plan`` service plans inside its
+callback, which blocks the executor for the plan's duration, so it refuses grids larger than
+``service.max_cells`` (default: 2 mm and coarser).
 
 Subscribes:
     obstacles (std_msgs/String: ObstacleSet JSON, LATCHED_QOS): the boxes and alert margin,
@@ -26,7 +29,7 @@ Publishes:
     planning_markers (visualization_msgs/MarkerArray, LATCHED_QOS): obstacles, alert regions and
         the path.
     ~/plan_outcome (std_msgs/String: PlanOutcome JSON, LATCHED_QOS): the outcome of every
-        request: the path's figures, or why there is none.
+        plan (the path's figures, or why there is none) and of every rejected service request.
 Services:
     ~/plan (nav_msgs/GetPlan): plan from ``start`` to ``goal`` (poses in ``frame_id``) at
         ``service.resolution_m``; the answer is the path, or a Path without poses when there is
@@ -142,8 +145,7 @@ class PathPlanner(GuardedCallbacks, Node):
         check_cost(self.params['cost'])
         self.frame_id = self.params['frame_id']
         self.model = ObstacleModel((), self.params['min_alert_margin_m'], 0.0)
-        self.last_query: PlanQuery | None = None
-        self.last_source = ''
+        self.last_query: PlanQuery | None = None  # what a replan repeats
         self.last_path = None  # points of the last published path, for the markers
         self.position: tuple[float, float, float] | None = None
         self.position_time_ns = 0
@@ -259,6 +261,8 @@ class PathPlanner(GuardedCallbacks, Node):
         return response
 
     def job(self, query: PlanQuery, source: str) -> Job:
+        """A job for ``query`` against the current obstacles; it is what a replan repeats."""
+        self.last_query = query
         return Job(query, self.model, source, dict(self.params))
 
     # -- planning --------------------------------------------------------------------------------
@@ -343,16 +347,15 @@ class PathPlanner(GuardedCallbacks, Node):
     def publish_result(self, result: Result) -> Path | None:
         """Publish a result (executor thread); return the path published, if any."""
         job, outcome = result.job, result.outcome
-        self.last_query, self.last_source = job.query, job.source
+        if job.model is not self.model:  # the obstacles changed meanwhile: a replan follows
+            self.get_logger().info(f'{job.source}: dropped, planned for obstacles since replaced')
+            return None
         self.outcome_pub.publish(to_string_msg(outcome))
         if result.planned is None:
             note = (' (the previous path no longer fits the obstacles)'
                     if job.source == 'replan' else '')
-            self.get_logger().error(f'{job.source}: {outcome.message}{note}')
+            self.get_logger().warning(f'{job.source}: {outcome.message}{note}')
             return None
-        if job.model is not self.model:
-            self.get_logger().info(f'{job.source}: planned for obstacles since replaced; '
-                                   'the replan follows')
         path = trajectory_to_path(result.planned.trajectory, self.frame_id,
                                   self.get_clock().now())
         self.path_pub.publish(path)
