@@ -116,8 +116,9 @@ def simplify(path: npt.ArrayLike, tolerance: float = 1e-9) -> npt.NDArray[np.flo
     path : array-like, shape (N, 3)
         Polyline [m].
     tolerance : float
-        Largest distance [m] of a dropped point from the chord of its neighbours' directions
-        (points are collinear when the cross product of the unit directions is below it).
+        A point closer than this to the previous one is a repeat [m]; a point where the unit
+        directions before and after it differ by less than this (their cross product) and do
+        not reverse is on a straight run.
 
     Returns
     -------
