@@ -25,8 +25,6 @@ setup(
             'trial_runner = inflarm_control.executables:trial_runner',
             'tip_path_demo = inflarm_control.executables:tip_path_demo',
             'elastostatic_ik = inflarm_control.executables:elastostatic_ik',
-            'inflarm-build-knowledge = inflarm_control.knowledge_cli:main',
-            'inflarm-sra-experiments = inflarm_control.sra_experiments:main',
             'inflarm-ik-figures = inflarm_control.ik_figures:main',
         ],
     },

@@ -85,3 +85,22 @@ def test_rosdep_keys_are_the_resolvable_ones():
     for package in PACKAGES:
         text = (REPO_ROOT / package / 'package.xml').read_text()
         assert '<exec_depend>python3-rosbags</exec_depend>' not in text, package
+
+
+ALGORITHMS = ('inflarm_control', 'inflarm_estimation', 'inflarm_planning', 'inflarm_vision')
+HARDWARE = 'inflarm_hw'
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_dependencies_point_one_way(package):
+    """The model at the bottom; algorithms and hardware/simulation side by side above it,
+    neither importing the other (as ros2_control's controllers and hardware components); the
+    system's tools on top, in inflarm_bringup."""
+    imported = imported_modules(package) & set(PACKAGES)
+    if package in ALGORITHMS:
+        assert HARDWARE not in imported, f'{package} imports {HARDWARE}'
+        assert 'inflarm_bringup' not in imported
+    if package == HARDWARE:
+        assert not imported & set(ALGORITHMS), f'{HARDWARE} imports {imported & set(ALGORITHMS)}'
+    if package in ('inflarm_model', 'inflarm_msgs_json'):
+        assert imported <= {'inflarm_model', 'inflarm_msgs_json'}, imported

@@ -21,10 +21,10 @@ def console_scripts(package: str) -> list[tuple[str, str, str]]:
     return ENTRY_POINT.findall((REPO_ROOT / package / 'setup.py').read_text())
 
 
-def test_the_seven_packages_exist():
+def test_the_seven_packages_and_the_bringup_exist():
     assert PACKAGES == [
-        'inflarm_control', 'inflarm_estimation', 'inflarm_hw', 'inflarm_model',
-        'inflarm_msgs_json', 'inflarm_planning', 'inflarm_vision',
+        'inflarm_bringup', 'inflarm_control', 'inflarm_estimation', 'inflarm_hw',
+        'inflarm_model', 'inflarm_msgs_json', 'inflarm_planning', 'inflarm_vision',
     ]
 
 
