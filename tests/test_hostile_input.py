@@ -60,6 +60,8 @@ from inflarm_msgs_json import (
     encode,
 )
 from inflarm_msgs_json.ros.conversions import to_string_msg
+from inflarm_planning.nodes.path_planner import PathPlanner
+from inflarm_planning.scenario import GOAL, OBSTACLE, START
 from ros_harness import wait_until
 
 ARM = FlexibleArm()
@@ -291,6 +293,15 @@ NODES = {
             lambda n: to_string_msg(LinkStatus.from_moments('link_1', 50e3, 20.0, 5.0)),
             lambda n, out: 0 in n.supervisor._link_status)}),  # noqa: SLF001
     'sim_mcu': NodeCase(SimMcuNode),
+    'path_planner': NodeCase(PathPlanner, valid={
+        'obstacles': (
+            lambda n: to_string_msg(ObstacleSet('sra_mount', 0.03, (OBSTACLE.to_message(),))),
+            lambda n, out: n.model.obstacles == (OBSTACLE,)),
+        'plan_request': (
+            lambda n: to_string_msg(PlanRequest('sra_mount', START, GOAL, 0.01)),
+            lambda n, out: n.last_request is not None and n.last_request.resolution == 0.01),
+        'ball_position': (lambda n: point(0.0, 0.12, 0.71, 'sra_mount'),
+                          lambda n, out: n.position == (0.0, 0.12, 0.71))}),
     'joint_state_monitor': NodeCase(JointStateMonitor, valid={
         'joint_states': (lambda n: JointState(name=['joint_1'], position=[0.1]),
                          lambda n, out: n.latest is not None)}),

@@ -81,6 +81,45 @@ class PlanRequest(Message):
     resolution: float = field_spec(POSITIVE, 'planning grid cell size [m]')
 
 
+PLAN_STATUSES = ('planned', 'no_path', 'rejected')
+
+
+@dataclass(frozen=True)
+class PlanOutcome(Message):
+    """Outcome of one plan request: the planned path's figures, or why there is none.
+
+    ``status`` is ``'planned'`` (a path was published), ``'no_path'`` (none exists; ``reason``
+    says which check failed) or ``'rejected'`` (the request itself was invalid). ``reason`` is
+    empty unless the status is ``'no_path'``; the figures are 0 unless it is ``'planned'``.
+    """
+
+    status: str = field_spec(Choice(PLAN_STATUSES), "'planned', 'no_path' or 'rejected'")
+    reason: str = field_spec(
+        Text(allow_empty=True),
+        "why there is no path, e.g. 'start_blocked' or 'no_connection'; '' otherwise",
+    )
+    message: str = field_spec(Text(allow_empty=True), 'what happened, for people and logs')
+    start: Vec3 = field_spec(VEC3, 'requested start [m]')
+    goal: Vec3 = field_spec(VEC3, 'requested goal [m]')
+    waypoints: int = field_spec(COUNT, 'poses in the published path')
+    length: float = field_spec(NONNEGATIVE, 'length of the published path [m]')
+    duration: float = field_spec(NONNEGATIVE, 'time the path is parameterized to take [s]')
+    planning_time: float = field_spec(NONNEGATIVE, 'wall time spent planning [s]')
+
+    def _check_invariants(self, path: str) -> None:
+        if (self.status == 'no_path') != bool(self.reason):
+            raise MessageError(
+                f'{path}.reason',
+                f"expected a reason exactly when status is 'no_path', got status "
+                f'{self.status!r} and reason {self.reason!r}',
+            )
+        if self.status == 'planned' and self.waypoints == 0:
+            raise MessageError(f'{path}.waypoints', "expected waypoints > 0 when 'planned'")
+        if self.status != 'planned' and (self.waypoints or self.length or self.duration):
+            raise MessageError(
+                f'{path}.waypoints', f'expected no path figures when {self.status!r}')
+
+
 @dataclass(frozen=True)
 class _ChamberPressureMap(Message, abstract=True):
     """Gauge pressure per chamber, shared by commanded and measured pressures."""
