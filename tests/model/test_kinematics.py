@@ -371,10 +371,12 @@ def test_urdf_structure_and_visuals():
     assert links[0] == 'base_link' and links[-1] == 'tip'
     joints = {j.get('name'): j.get('type') for j in root.iter('joint')}
     assert joints == {**dict.fromkeys(FlexibleArm.JOINT_NAMES, 'revolute'), 'tip_joint': 'fixed'}
-    cylinders = list(root.iter('cylinder'))
+    cylinders = [v.find('geometry/cylinder') for v in root.iter('visual')]
     assert {c.get('radius') for c in cylinders} == {'0.07'}
-    # The visuals cover both inflatable links end to end.
+    # The visuals cover both inflatable links end to end, and so do the collisions.
     np.testing.assert_allclose(sum(float(c.get('length')) for c in cylinders), 2 * L)
+    collisions = [c.find('geometry/cylinder') for c in root.iter('collision')]
+    assert [c.attrib for c in collisions] == [c.attrib for c in cylinders]
 
 
 def test_spring_stiffness_round_trip():
