@@ -31,3 +31,41 @@ def reference_deflections(arm, q_m, force, k, max_residual: float) -> np.ndarray
     sol = root(residual, np.zeros(4), method='hybr', tol=1e-14)
     assert np.abs(residual(sol.x)).max() < max_residual
     return sol.x
+
+
+def smooth_motion(rng, samples: int, duration: float, max_force: float):
+    """A seeded smooth motion: motor angles (samples, 3) [rad] within the motor limits, each a
+    sum of two sinusoids, and a tip load (samples, 3) [N] whose magnitude ramps from 0 to
+    ``max_force`` while its direction turns slowly."""
+    t = np.linspace(0.0, duration, samples)[:, None]
+    center = rng.uniform([-2.0, -0.8, -1.8], [2.0, 0.8, 1.8])
+    amplitude = rng.uniform([0.2, 0.1, 0.1], [0.8, 0.5, 0.6])
+    frequency = rng.uniform(0.05, 0.3, (2, 3))
+    phase = rng.uniform(0.0, 2 * np.pi, (2, 3))
+    q_m = center + amplitude * 0.5 * (np.sin(2 * np.pi * frequency[0] * t + phase[0])
+                                      + np.sin(2 * np.pi * frequency[1] * t + phase[1]))
+    q_m = np.clip(q_m, [-np.pi, -np.pi / 2, -2.6], [np.pi, np.pi / 2, 2.6])
+    axis_a, axis_b = rng.normal(size=(2, 3))
+    turn = rng.uniform(0.2, 1.0) * t / duration
+    direction = np.cos(turn) * axis_a + np.sin(turn) * axis_b
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    return q_m, direction * max_force * (t / duration)
+
+
+def reference_motion(arm, q_m, forces, k, max_residual: float = 1e-10):
+    """Independent truth along a motion: the spring deflections (N, 4) by continuation in
+    time (``scipy.optimize.root`` on the textbook DH chain, each sample from the previous
+    one) and the motor torques tau_m = U_m^T f (N, 3)."""
+    k = np.broadcast_to(np.asarray(k, dtype=float), (4,))
+    q_k = np.zeros(4)
+    Q_k, Tau = np.empty((len(q_m), 4)), np.empty((len(q_m), 3))
+    for i, (motors, force) in enumerate(zip(q_m, forces, strict=True)):
+        def residual(x, motors=motors, force=force):
+            U = dh_jacobian_reference(arm.dh_table, full_q(motors, x))[:3]
+            return k * x - U[:, K].T @ force
+
+        q_k = root(residual, q_k, method='hybr', tol=1e-14).x
+        assert np.abs(residual(q_k)).max() < max_residual
+        U = dh_jacobian_reference(arm.dh_table, full_q(motors, q_k))[:3]
+        Q_k[i], Tau[i] = q_k, U[:, M].T @ force
+    return Q_k, Tau

@@ -99,6 +99,9 @@ _ARMIJO = 1e-4
 _DIVERGED = 2.0 * SPRING_DEFLECTION_LIMIT
 _M = MOTOR_INDICES  # tuples: compile-time constants in the numba kernels
 _S = SPRING_INDICES
+# Compiled once, then loaded from the on-disk cache; floats divide as in numpy (inf, NaN),
+# never raising, so that a singular sample is reported instead of stopping a batch.
+_JIT = dict(cache=True, error_model='numpy')
 
 
 # --- validation ------------------------------------------------------------------------------
@@ -266,20 +269,20 @@ def tip_position_and_jacobian(
 # leading batch dimensions (numba gufuncs); the solvers call them inside compiled loops.
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _load_torques(J, f, tau):
     for j in range(J.shape[1]):
         tau[j] = J[0, j] * f[0] + J[1, j] * f[1] + J[2, j] * f[2]
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _spring_residual(J, f, q_k, k, g):
     for s in range(4):
         j = _S[s]
         g[s] = k[s] * q_k[s] - (J[0, j] * f[0] + J[1, j] * f[1] + J[2, j] * f[2])
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _inverse_motor_transpose(J, inverse):
     """(U_m^T)^-1 by the adjugate: U_m^T has rows a, b, c = u_1, u_2, u_5, so its inverse has
     columns (b x c, c x a, a x b) / det, det = a . (b x c). Returns det (0: singular)."""
@@ -295,7 +298,7 @@ def _inverse_motor_transpose(J, inverse):
     return det
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _motor_load(J, tau, f):
     inverse = np.empty((3, 3))
     det = _inverse_motor_transpose(J, inverse)
@@ -304,7 +307,7 @@ def _motor_load(J, tau, f):
     return det
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _load_hessian(J, f, H):
     n = J.shape[1]
     for b in range(n):
@@ -315,7 +318,7 @@ def _load_hessian(J, f, H):
             H[a, b] = H[b, a] = J[3, a] * vx + J[4, a] * vy + J[5, a] * vz
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _equilibrium_stiffness(H, k, A):
     for r in range(4):
         for c in range(4):
@@ -323,7 +326,7 @@ def _equilibrium_stiffness(H, k, A):
         A[r, r] += k[r]
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _reduced_newton_matrix(J, H, k, D):
     inverse = np.empty((3, 3))
     _inverse_motor_transpose(J, inverse)
@@ -340,7 +343,7 @@ def _reduced_newton_matrix(J, H, k, D):
             D[r, c] += J[0, j] * x0 + J[1, j] * x1 + J[2, j] * x2
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _positive_definite(A):
     """Cholesky of the symmetric 4x4 A succeeds."""
     L = np.zeros((4, 4))
@@ -359,7 +362,7 @@ def _positive_definite(A):
     return True
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _solve4(A, b, x):
     """x = A^-1 b by Gaussian elimination with partial pivoting; False if A is singular."""
     M = A.copy()
@@ -390,7 +393,7 @@ def _solve4(A, b, x):
 
 # --- public broadcasting forms ---------------------------------------------------------------
 
-_GU = dict(nopython=True, cache=True)  # compiled once, then loaded from disk
+_GU = dict(nopython=True, cache=True)
 
 
 @guvectorize(['void(f8[:, :], f8[:], f8[:])'], '(r,n),(c)->(n)', **_GU)
@@ -731,7 +734,7 @@ class ElastostaticSolution:
         return self.status == 'converged'
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _evaluate(dh_table, q_m, q_k, load, inverse, k, q, pose, J, origins, f, g):
     """Kinematics, force and residual of eq. (7) at q_k; returns |g|^2 (NaN if not finite).
 
@@ -753,7 +756,7 @@ def _evaluate(dh_table, q_m, q_k, load, inverse, k, q, pose, J, origins, f, g):
     return merit if math.isfinite(merit) else math.nan
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _deflation(x, roots, gradient):
     """Deflation factor m(x) = prod_j (1/|x - r_j|^2 + 1); ``gradient`` gets grad log m.
 
@@ -775,7 +778,7 @@ def _deflation(x, roots, gradient):
     return factor
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, roots, tol,
                   max_iterations, q_k_out, f_out, tip_out, J_out):
     """Newton's method (or the fixed point of Fig. 5) on the residual of eq. (7), one sample.
@@ -864,7 +867,7 @@ def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, roots, tol
     return status, iterations, residual
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _continue_sample(dh_table, q_m, tau_m, k, steps, tol, max_iterations, q_k_out, f_out,
                      tip_out, J_out):
     """Continuation in the torques: lambda tau_m from 0 to 1, each solved from the last."""
@@ -887,7 +890,7 @@ def _continue_sample(dh_table, q_m, tau_m, k, steps, tol, max_iterations, q_k_ou
             return status, total, residual
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def _solve_rows(dh_table, Q_m, loads, inverse, mode, k, Q_k0, roots, tol, max_iterations,
                 steps, Q_k, F, tips, Js, status, iterations, residual):
     for i in range(Q_m.shape[0]):
