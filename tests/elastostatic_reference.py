@@ -69,3 +69,43 @@ def reference_motion(arm, q_m, forces, k, max_residual: float = 1e-10):
         U = dh_jacobian_reference(arm.dh_table, full_q(motors, q_k))[:3]
         Q_k[i], Tau[i] = q_k, U[:, M].T @ force
     return Q_k, Tau
+
+
+def reference_loads(arm, q_m, tau_m, k, rng, starts: int = 200, max_force: float = 150.0):
+    """Independent multi-start search for the admissible loads that give these torques.
+
+    ``scipy.optimize.root`` on the full 7-equation system (U_m^T f = tau_m, k q_k = U_k^T f)
+    of the textbook chain from ``starts`` random (f, q_k), f from the rigid solve at a random
+    q_k in the model range; keeps the distinct solutions with |q_k| < pi/2, |f| <= max_force
+    and a stable equilibrium (K - H_kk positive definite, H by central differences). Returns
+    a list of (force (3,), q_k (4,)).
+    """
+    k = np.broadcast_to(np.asarray(k, dtype=float), (4,))
+
+    def residual(x):
+        U = dh_jacobian_reference(arm.dh_table, full_q(q_m, x[3:]))[:3]
+        return np.concatenate([U[:, M].T @ x[:3] - tau_m, k * x[3:] - U[:, K].T @ x[:3]])
+
+    def stable(f, q_k, h=1e-6):
+        def spring_torque(x):
+            return dh_jacobian_reference(arm.dh_table, full_q(q_m, x))[:3, K].T @ f
+
+        H = np.array([(spring_torque(q_k + h * e) - spring_torque(q_k - h * e)) / (2 * h)
+                      for e in np.eye(4)])
+        return np.linalg.eigvalsh(np.diag(k) - 0.5 * (H + H.T))[0] > 0.0
+
+    found = []
+    for _ in range(starts):
+        q_k0 = rng.uniform(-np.pi / 2, np.pi / 2, 4) * rng.uniform(0.0, 1.0)
+        U = dh_jacobian_reference(arm.dh_table, full_q(q_m, q_k0))[:3]
+        try:
+            f0 = np.linalg.solve(U[:, M].T, tau_m)
+        except np.linalg.LinAlgError:
+            continue
+        x = root(residual, np.concatenate([f0, q_k0]), method='hybr', tol=1e-13).x
+        if (np.abs(residual(x)).max() > 1e-8 or np.abs(x[3:]).max() >= np.pi / 2
+                or np.linalg.norm(x[:3]) > max_force or not stable(x[:3], x[3:])):
+            continue
+        if all(np.abs(x[3:] - q).max() > 1e-6 for _, q in found):
+            found.append((x[:3], x[3:]))
+    return found
