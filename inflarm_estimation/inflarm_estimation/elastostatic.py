@@ -50,10 +50,8 @@ from inflarm_model.elastostatics import (
     check_solver_options,
     check_stiffness,
     check_vector,
+    conditioning,
     link_moments,
-    load_hessian,
-    motor_load,
-    reduced_newton_matrix,
     solve_load_continuation,
     solve_load_newton,
 )
@@ -85,7 +83,7 @@ SEARCH_STARTS.setflags(write=False)
 _SEARCH_ITERATIONS = 30
 # Two solutions closer than this in q_k [rad] are the same one.
 _SAME = 1e-6
-_M = list(MOTOR_INDICES)
+_M, _S = list(MOTOR_INDICES), list(SPRING_INDICES)
 
 _REASONS = {
     'converged': '',
@@ -214,14 +212,11 @@ def _check_options(tol, max_iterations, max_condition, max_force):
 
 
 def _condition_numbers(jacobian: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """2-norm condition number of U_m for Jacobians (..., 6, 7); inf where singular/NaN."""
-    U_m = jacobian[..., :3, _M]
-    out = np.full(U_m.shape[:-2], np.inf)
-    finite = np.isfinite(U_m).all(axis=(-2, -1))
+    """2-norm condition number of U_m for Jacobians (..., 6, 7); inf where singular or NaN."""
+    out = np.full(jacobian.shape[:-2], np.inf)
+    finite = np.isfinite(jacobian).all(axis=(-2, -1))
     if finite.any():
-        s = np.linalg.svd(U_m[finite], compute_uv=False)
-        with np.errstate(divide='ignore'):
-            out[finite] = np.where(s[..., 2] > 0.0, s[..., 0] / s[..., 2], np.inf)
+        out[finite] = conditioning(jacobian[finite], np.zeros(3), np.ones(4))[0]
     return out
 
 
@@ -239,8 +234,14 @@ class _Candidates:
 
 
 def _admissible(solution, max_force) -> npt.NDArray[np.bool_]:
+    """Converged (stable, within the model range) with |f| <= max_force."""
     with np.errstate(invalid='ignore'):
-        return solution.converged & (np.linalg.norm(solution.force, axis=-1) <= max_force)
+        return solution.converged & ((solution.force**2).sum(axis=-1) <= max_force**2)
+
+
+def _distance(a: list[float], b: list[float]) -> float:
+    """max |a_i - b_i| of two q_k [rad]."""
+    return max(abs(x - y) for x, y in zip(a, b, strict=True))
 
 
 def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candidates:
@@ -265,6 +266,10 @@ def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candi
     q_ks = [p.q_k.reshape(N, -1, 4) for p in parts]
     tips = [p.tip_position.reshape(N, -1, 3) for p in parts]
     conds = [_condition_numbers(p.jacobian).reshape(N, -1) for p in parts]
+    # Most starts end on the direct solution: drop those first, then compare the few left.
+    first = np.where(keep[0][:, :1, None], q_ks[0][:, :1], np.inf)  # (N, 1, 4)
+    for part in range(1, len(parts)):
+        keep[part] &= np.abs(q_ks[part] - first).max(axis=-1) > _SAME
     for i in range(N):
         found, others = [], []
         for part in range(len(parts)):
@@ -273,7 +278,9 @@ def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candi
                 if all(np.abs(q - other[1]).max() > _SAME for other in found):
                     found.append((forces[part][i, j], q, tips[part][i, j], conds[part][i, j]))
             for j in np.flatnonzero(converged[part][i] & ~keep[part][i]):
-                others.append(forces[part][i, j])
+                f = forces[part][i, j]
+                if all(np.abs(f - other).max() > 1e-6 for other in others):
+                    others.append(f)
         found.sort(key=lambda s: float(np.linalg.norm(s[0])))
         solutions.append(tuple(found))
         rejected.append(tuple(others))
@@ -532,6 +539,7 @@ class LoadTracker:
         self._input: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
         self._branches = np.empty((0, 4))  # tracked solutions q_k [rad]
         self._motion = np.empty(0)  # last change of each [rad]
+        self._directions = np.empty((0, 4))  # fold direction of D at each
         self._cold_starts = 0
 
     @property
@@ -579,71 +587,56 @@ class LoadTracker:
         found = solutions[0]
         self._branches = np.array([s[1] for s in found]).reshape(-1, 4)
         self._motion = np.zeros(len(found))
+        self._directions = np.zeros((len(found), 4))
+        if found:
+            q = np.zeros((len(found), 7))
+            q[:, _M], q[:, _S] = q_m, self._branches
+            J = self._arm.fk_and_jacobian_batch(q)[1]
+            self._directions = conditioning(J, np.array([s[0] for s in found]), self._k)[2]
         return estimates[0]
 
     def _warm(self, q_m, tau_m) -> LoadPoseEstimate:
         tol, max_iterations, max_condition, max_force = self._options
-        p = self._branches
-        n = len(p)
-        reach = np.maximum(self._reach_factor * self._motion, self._min_reach)
-        v = self._fold_directions(q_m, tau_m, p)
-        starts = np.concatenate([p, p + reach[:, None] * v, p - reach[:, None] * v])
+        p, n = self._branches, len(self._branches)
+        reach = np.maximum(self._reach_factor * self._motion, self._min_reach)[:, None]
+        starts = np.concatenate([p, p + reach * self._directions, p - reach * self._directions])
         solution = solve_load_newton(self._arm, np.broadcast_to(q_m, (3 * n, 3)),
                                      np.broadcast_to(tau_m, (3 * n, 3)), self._k,
                                      q_k0=starts, tol=tol, max_iterations=max_iterations)
-        ok = _admissible(solution, max_force)
-        tracked, motion = [], []
+        ok = _admissible(solution, max_force).tolist()
+        q_k, previous, moved = solution.q_k.tolist(), p.tolist(), self._motion.tolist()
+        rows, motion = [], []
         for b in range(n):  # the continuation of each branch, then what lies within its reach
-            rows = [b, n + b, 2 * n + b]
-            main = rows[0]
-            if not ok[main]:
+            if not ok[b]:
                 continue
-            r = solution.q_k[main]
-            step = float(np.abs(r - p[b]).max())
-            radius = max(self._reach_factor * max(step, self._motion[b]), self._min_reach)
-            for row in rows:
-                q = solution.q_k[row]
-                if ok[row] and np.abs(q - r).max() <= radius and all(
-                        np.abs(q - t).max() > _SAME for t in tracked):
-                    tracked.append(q)
-                    motion.append(step if row == main else radius)
-        if not tracked:
+            r = q_k[b]
+            step = _distance(r, previous[b])
+            radius = max(self._reach_factor * max(step, moved[b]), self._min_reach)
+            for row in (b, n + b, 2 * n + b):
+                if ok[row] and _distance(q_k[row], r) <= radius and all(
+                        _distance(q_k[row], q_k[t]) > _SAME for t in rows):
+                    rows.append(row)
+                    motion.append(step if row == b else radius)
+        if not rows:
             return self._cold(q_m, tau_m)
-        self._branches = np.array(tracked)
-        self._motion = np.array(motion)
-        return self._report(q_m, tau_m, solution, ok)
-
-    def _fold_directions(self, q_m, tau_m, p):
-        """Unit right singular vectors of D's smallest singular value at the branches."""
-        q = np.zeros((len(p), 7))
-        q[:, _M], q[:, list(SPRING_INDICES)] = q_m, p
-        J = self._arm.fk_and_jacobian_batch(q)[1]
-        f = motor_load(J, np.broadcast_to(tau_m, (len(p), 3)))
-        D = reduced_newton_matrix(J, load_hessian(J, f), self._k)
-        if not np.isfinite(D).all():
-            return np.zeros((len(p), 4))
-        return np.linalg.svd(D)[2][:, -1, :]
-
-    def _report(self, q_m, tau_m, solution, ok) -> LoadPoseEstimate:
-        tol, max_iterations, max_condition, max_force = self._options
-        rows = [int(np.flatnonzero(ok & (np.abs(solution.q_k - b).max(axis=1) <= _SAME))[0])
-                for b in self._branches]
-        cond = _condition_numbers(solution.jacobian[rows])
-        iterations = int(solution.iterations[rows[0]])
-        residual = float(solution.residual[rows[0]])
+        cond, _, directions = conditioning(solution.jacobian[rows], solution.force[rows],
+                                           self._k)
+        self._branches, self._motion = solution.q_k[rows], np.array(motion)
+        self._directions = directions
+        iterations, residual = int(solution.iterations[rows[0]]), float(
+            solution.residual[rows[0]])
         nan3, nan4 = np.full(3, np.nan), np.full(4, np.nan)
         if len(rows) == 1:
             i = rows[0]
             if cond[0] <= max_condition:
                 return LoadPoseEstimate(
-                    solution.force[i].copy(), solution.q_k[i].copy(), solution.tau_k[i].copy(),
-                    solution.tip_position[i].copy(), iterations, True, float(cond[0]),
-                    residual, 'converged', '')
+                    solution.force[i], solution.q_k[i], solution.tau_k[i],
+                    solution.tip_position[i], iterations, True, float(cond[0]), residual,
+                    'converged', '')
             reason = _REASONS['singular'].format(cond=cond[0], max_cond=max_condition)
             return LoadPoseEstimate(nan3, nan4, nan4.copy(), nan3.copy(), iterations, False,
                                     float(cond[0]), residual, 'singular', reason)
-        forces = sorted((solution.force[i].copy() for i in rows),
-                        key=lambda f: float(np.linalg.norm(f)))
+        forces = sorted((solution.force[i] for i in rows), key=lambda f: float(np.linalg.norm(f)))
         reason = _REASONS['ambiguous'].format(n=len(forces), loads=_fmt(forces))
         return LoadPoseEstimate(nan3, nan4, nan4.copy(), nan3.copy(), iterations, False,
                                 float(cond[0]), residual, 'ambiguous', reason, tuple(forces))

@@ -69,6 +69,7 @@ __all__ = [
     'check_solver_options',
     'check_stiffness',
     'check_vector',
+    'conditioning',
     'equilibrium_stiffness',
     'link_moments',
     'load_hessian',
@@ -167,7 +168,11 @@ def check_stiffness(stiffness: npt.ArrayLike) -> npt.NDArray[np.float64]:
         If ``stiffness`` is not a scalar or of shape (4,), or not positive and finite.
     """
     if isinstance(stiffness, float) and stiffness > 0.0 and math.isfinite(stiffness):
-        return np.full(4, stiffness)  # the common case, fast
+        return np.full(4, stiffness)  # the common cases, fast
+    if (isinstance(stiffness, np.ndarray) and stiffness.shape == (4,)
+            and stiffness.dtype == np.float64 and stiffness.min() > 0.0
+            and math.isfinite(stiffness.sum())):
+        return stiffness
     try:
         k = np.asarray(stiffness, dtype=float)
     except (TypeError, ValueError):
@@ -433,6 +438,29 @@ def _stable_gu(H, k, out):
     out[0] = _positive_definite(A)
 
 
+@guvectorize(['void(f8[:, :], f8[:], f8[:], f8[:], f8[:], f8[:])'], '(r,n),(c),(s)->(),(),(s)',
+             **_GU)
+def _conditioning_gu(J, f, k, condition, sigma, direction):
+    U_m = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            U_m[i, j] = J[i, _M[j]]
+    condition[0], sigma[0] = np.inf, np.nan
+    direction[:] = 0.0
+    if not np.isfinite(U_m).all():  # LAPACK refuses NaN
+        return
+    singular = np.linalg.svd(U_m)[1]
+    if singular[2] > 0.0:
+        condition[0] = singular[0] / singular[2]
+    H, D = np.empty((7, 7)), np.empty((4, 4))
+    _load_hessian(J, f, H)
+    _reduced_newton_matrix(J, H, k, D)
+    if np.isfinite(D).all():
+        _, values, vt = np.linalg.svd(D)
+        sigma[0] = values[3]
+        direction[:] = vt[3]
+
+
 def _f8(x: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return np.asarray(x, dtype=np.float64)
 
@@ -576,6 +604,36 @@ def reduced_newton_matrix(
     """
     with np.errstate(divide='ignore', invalid='ignore'):
         return _reduced_newton_matrix_gu(_f8(jacobian), _f8(hessian), _f8(stiffness))
+
+
+def conditioning(
+    jacobian: npt.ArrayLike, force: npt.ArrayLike, stiffness: npt.ArrayLike
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """How well motor torques determine a solution of eqs (6)-(7), and where it folds.
+
+    Parameters
+    ----------
+    jacobian : array-like, shape (..., 6, 7)
+        Tip Jacobian at the solution (finite).
+    force : array-like, shape (..., 3)
+        The solution's tip force f [N].
+    stiffness : array-like, shape (4,)
+        k [N·m/rad].
+
+    Returns
+    -------
+    condition : ndarray, shape (...)
+        2-norm condition number of U_m (inf where singular or not finite): the amplification
+        of relative torque errors into the force of eq. (6).
+    sigma : ndarray, shape (...)
+        Smallest singular value of D (``reduced_newton_matrix``) [N·m/rad]: zero on a fold of
+        f -> tau_m, where two solutions meet; NaN where D is not finite.
+    direction : ndarray, shape (..., 4)
+        Its right singular vector (unit, q_k space; zero where D is not finite): along it the
+        solutions of a fold meet.
+    """
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _conditioning_gu(_f8(jacobian), _f8(force), _f8(stiffness))
 
 
 # --- arm-level forms -------------------------------------------------------------------------
