@@ -265,7 +265,7 @@ def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candi
     forces = [p.force.reshape(N, -1, 3) for p in parts]
     q_ks = [p.q_k.reshape(N, -1, 4) for p in parts]
     tips = [p.tip_position.reshape(N, -1, 3) for p in parts]
-    conds = [_condition_numbers(p.jacobian).reshape(N, -1) for p in parts]
+    jacobians = [p.jacobian.reshape(N, -1, 6, 7) for p in parts]
     # Most starts end on the direct solution: drop those first, then compare the few left.
     first = np.where(keep[0][:, :1, None], q_ks[0][:, :1], np.inf)  # (N, 1, 4)
     for part in range(1, len(parts)):
@@ -276,15 +276,21 @@ def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candi
             for j in np.flatnonzero(keep[part][i]):
                 q = q_ks[part][i, j]
                 if all(np.abs(q - other[1]).max() > _SAME for other in found):
-                    found.append((forces[part][i, j], q, tips[part][i, j], conds[part][i, j]))
+                    found.append((forces[part][i, j], q, tips[part][i, j],
+                                  jacobians[part][i, j]))
             for j in np.flatnonzero(converged[part][i] & ~keep[part][i]):
                 f = forces[part][i, j]
                 if all(np.abs(f - other).max() > 1e-6 for other in others):
                     others.append(f)
         found.sort(key=lambda s: float(np.linalg.norm(s[0])))
-        solutions.append(tuple(found))
+        solutions.append(found)
         rejected.append(tuple(others))
-    return _Candidates(tuple(solutions), main, tuple(rejected))
+    # Condition numbers of the solutions kept (few), not of every start.
+    kept = [s[3] for found in solutions for s in found]
+    conds = iter(_condition_numbers(np.array(kept)).tolist() if kept else ())
+    solutions = tuple(tuple((f, q, tip, next(conds)) for f, q, tip, _ in found)
+                      for found in solutions)
+    return _Candidates(solutions, main, tuple(rejected))
 
 
 def _replace_rows(solution, rows, other):

@@ -52,7 +52,12 @@ import numpy as np
 import numpy.typing as npt
 
 from inflarm_model.kinematics import dh_chain_kinematics
-from inflarm_model.urdf import MOTOR_INDICES, SPRING_DEFLECTION_LIMIT, SPRING_INDICES
+from inflarm_model.urdf import (
+    DEFAULT_STIFFNESS,
+    MOTOR_INDICES,
+    SPRING_DEFLECTION_LIMIT,
+    SPRING_INDICES,
+)
 
 __all__ = [
     'DEFAULT_MAX_ITERATIONS',
@@ -85,6 +90,7 @@ __all__ = [
     'spring_torques',
     'stable',
     'tip_position_and_jacobian',
+    'warm_up',
 ]
 
 # Equilibrium residual tolerance max |k q_k - U_k^T f| [N·m]: with k ~ 170 N·m/rad it pins q_k
@@ -740,6 +746,7 @@ def link_moments(
 
 STATUS_NAMES = ('converged', 'max_iterations', 'line_search', 'diverged', 'unstable',
                 'out_of_range')
+_STATUS_ARRAY = np.array(STATUS_NAMES)
 _CONVERGED, _MAX_ITERATIONS, _LINE_SEARCH, _DIVERGED, _UNSTABLE, _OUT_OF_RANGE = range(6)
 _NEWTON, _FIXED_POINT, _CONTINUATION = range(3)
 
@@ -998,7 +1005,7 @@ def _run(arm, q_m, load, load_name, load_unit, stiffness, q_k0, tol, max_iterati
     if bad.any():
         for array in (Q_k, F, tips, Js):
             array[bad] = np.nan
-    status = np.array(STATUS_NAMES)[codes]
+    status = _STATUS_ARRAY[codes]
     if batch == ():
         return ElastostaticSolution(F[0], Q_k[0], k * Q_k[0], tips[0], Js[0],
                                     int(iterations[0]), float(residual[0]), str(status[0]))
@@ -1203,3 +1210,37 @@ def solve_load_continuation(
     return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, None, tol, max_iterations,
                 inverse=True, mode=_CONTINUATION, steps=int(steps))
 
+
+
+def warm_up(arm: object | None = None) -> None:
+    """Compile every kernel of this module, or load it from numba's on-disk cache.
+
+    The kernels compile on their first call (about a minute on a 2-core machine, once per
+    source change; later processes load them from the cache in ``__pycache__`` in well under
+    a second). Call this where a first call must not be slow: at set-up, or before a node
+    starts its timers.
+
+    Parameters
+    ----------
+    arm : FlexibleArm, optional
+        The arm to solve for; a default ``FlexibleArm`` if None.
+    """
+    if arm is None:
+        from inflarm_model.kinematics import FlexibleArm  # noqa: PLC0415 (only when needed)
+
+        arm = FlexibleArm()
+    q_m, force = np.array([0.3, 0.8, -1.2]), np.array([0.0, 10.0, -15.0])
+    equilibrium = spring_deflections(arm, q_m, force, DEFAULT_STIFFNESS)
+    q = np.empty(7)
+    q[list(_M)], q[list(_S)] = q_m, equilibrium.q_k
+    tau_m = motor_torques(arm, q, force)
+    for solver in (solve_load_newton, solve_load_fixed_point, solve_load_continuation):
+        solver(arm, q_m, tau_m, DEFAULT_STIFFNESS)
+    J = equilibrium.jacobian
+    conditioning(J, force, np.full(4, DEFAULT_STIFFNESS))
+    H = load_hessian(J, force)
+    reduced_newton_matrix(J, H, np.full(4, DEFAULT_STIFFNESS))
+
+
+if __name__ == '__main__':
+    warm_up()
