@@ -822,45 +822,20 @@ def _evaluate(dh_table, q_m, q_k, load, inverse, k, q, pose, J, origins, f, g):
 
 
 @njit(**_JIT)
-def _deflation(x, roots, gradient):
-    """Deflation factor m(x) = prod_j (1/|x - r_j|^2 + 1); ``gradient`` gets grad log m.
-
-    Farrell, Birkisson and Funke, SIAM J. Sci. Comput. 37 (2015) A2026: Newton on m(x) g(x)
-    cannot converge to a deflated root r_j, and its step is the plain Newton step d divided by
-    1 - grad(log m) . d.
-    """
-    factor = 1.0
-    gradient[:] = 0.0
-    for j in range(roots.shape[0]):
-        d2 = 0.0
-        for i in range(4):
-            d2 += (x[i] - roots[j, i]) ** 2
-        inv = 1.0 / d2
-        factor *= inv + 1.0
-        w = -2.0 * inv * inv / (inv + 1.0)
-        for i in range(4):
-            gradient[i] += w * (x[i] - roots[j, i])
-    return factor
-
-
-@njit(**_JIT)
-def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, roots, tol,
-                  max_iterations, q_k_out, f_out, tip_out, J_out):
+def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, tol, max_iterations,
+                  q_k_out, f_out, tip_out, J_out):
     """Newton's method (or the fixed point of Fig. 5) on the residual of eq. (7), one sample.
 
     Newton uses K - H_kk (forward) or D (inverse, ``reduced_newton_matrix``), a correction
-    shortened to MAX_NEWTON_STEP and a backtracking (Armijo) line search on |g|^2 (|m g|^2
-    with deflation). Returns (status code, iterations, residual); the outputs hold the last
-    iterate.
+    shortened to MAX_NEWTON_STEP and a backtracking (Armijo) line search on |g|^2. Returns
+    (status code, iterations, residual); the outputs hold the last iterate.
     """
     q, origins = np.empty(7), np.empty((8, 3))
     pose, J, f, g = np.empty((4, 4)), np.empty((6, 7)), np.empty(3), np.empty(4)
     pose_t, J_t, f_t, g_t = np.empty((4, 4)), np.empty((6, 7)), np.empty(3), np.empty(4)
-    H, A, d, grad = np.empty((7, 7)), np.empty((4, 4)), np.empty(4), np.empty(4)
+    H, A, d = np.empty((7, 7)), np.empty((4, 4)), np.empty(4)
     x = q_k0.copy()
-    deflated = roots.shape[0] > 0
     merit = _evaluate(dh_table, q_m, x, load, inverse, k, q, pose, J, origins, f, g)
-    scale = _deflation(x, roots, grad) if deflated else 1.0
     iterations = 0
     status = _MAX_ITERATIONS
     residual = math.inf
@@ -888,31 +863,26 @@ def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, roots, tol
             if not _solve4(A, -g, d):
                 status = _LINE_SEARCH
                 break
-            if deflated:
-                _deflation(x, roots, grad)
-                d /= 1.0 - (grad[0] * d[0] + grad[1] * d[1] + grad[2] * d[2] + grad[3] * d[3])
             size = max(abs(d[0]), abs(d[1]), abs(d[2]), abs(d[3]))
             if not math.isfinite(size):
                 status = _LINE_SEARCH
                 break
             if size > MAX_NEWTON_STEP:
                 d *= MAX_NEWTON_STEP / size
-            before = scale * scale * merit
             alpha = 1.0
             accepted = False
             for _ in range(_MAX_HALVINGS):
                 trial = x + alpha * d
                 merit_t = _evaluate(dh_table, q_m, trial, load, inverse, k, q, pose_t, J_t,
                                     origins, f_t, g_t)
-                scale_t = _deflation(trial, roots, grad) if deflated else 1.0
-                if scale_t * scale_t * merit_t <= (1.0 - 2.0 * _ARMIJO * alpha) * before:
+                if merit_t <= (1.0 - 2.0 * _ARMIJO * alpha) * merit:
                     accepted = True
                     break
                 alpha *= 0.5
             if not accepted:
                 status = _LINE_SEARCH
                 break
-            x, merit, scale = trial, merit_t, scale_t
+            x, merit = trial, merit_t
             pose, pose_t, J, J_t, f, f_t, g, g_t = pose_t, pose, J_t, J, f_t, f, g_t, g
         if max(abs(x[0]), abs(x[1]), abs(x[2]), abs(x[3])) > _DIVERGED:
             status = _DIVERGED
@@ -936,15 +906,14 @@ def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, roots, tol
 def _continue_sample(dh_table, q_m, tau_m, k, steps, tol, max_iterations, q_k_out, f_out,
                      tip_out, J_out):
     """Continuation in the torques: lambda tau_m from 0 to 1, each solved from the last."""
-    none = np.empty((0, 4))
     x = np.zeros(4)
     lam, step = 0.0, 1.0 / steps
     total = 0
     while True:
         target = min(1.0, lam + step)
         status, iterations, residual = _solve_sample(
-            dh_table, q_m, target * tau_m, True, False, k, x, none, tol, max_iterations,
-            q_k_out, f_out, tip_out, J_out)
+            dh_table, q_m, target * tau_m, True, False, k, x, tol, max_iterations, q_k_out,
+            f_out, tip_out, J_out)
         total += iterations
         if status == _CONVERGED:
             lam = target
@@ -956,8 +925,8 @@ def _continue_sample(dh_table, q_m, tau_m, k, steps, tol, max_iterations, q_k_ou
 
 
 @njit(**_JIT)
-def _solve_rows(dh_table, Q_m, loads, inverse, mode, k, Q_k0, roots, tol, max_iterations,
-                steps, Q_k, F, tips, Js, status, iterations, residual):
+def _solve_rows(dh_table, Q_m, loads, inverse, mode, k, Q_k0, tol, max_iterations, steps,
+                Q_k, F, tips, Js, status, iterations, residual):
     for i in range(Q_m.shape[0]):
         if mode == _CONTINUATION:
             status[i], iterations[i], residual[i] = _continue_sample(
@@ -965,54 +934,51 @@ def _solve_rows(dh_table, Q_m, loads, inverse, mode, k, Q_k0, roots, tol, max_it
                 tips[i], Js[i])
         else:
             status[i], iterations[i], residual[i] = _solve_sample(
-                dh_table, Q_m[i], loads[i], inverse, mode == _FIXED_POINT, k, Q_k0[i],
-                roots[i], tol, max_iterations, Q_k[i], F[i], tips[i], Js[i])
+                dh_table, Q_m[i], loads[i], inverse, mode == _FIXED_POINT, k, Q_k0[i], tol,
+                max_iterations, Q_k[i], F[i], tips[i], Js[i])
+
+
+def _rows(x: npt.NDArray[np.float64], batch: tuple[int, ...], n: int):
+    """``x`` (batch + (n,), or broadcastable to it) as C-contiguous rows (N, n)."""
+    if x.shape[:-1] != batch:
+        x = np.broadcast_to(x, batch + (n,))
+    return np.ascontiguousarray(x.reshape(-1, n))
 
 
 def _run(arm, q_m, load, load_name, load_unit, stiffness, q_k0, tol, max_iterations, *,
-         inverse, mode=_NEWTON, deflate=None, steps=1) -> ElastostaticSolution:
+         inverse, mode=_NEWTON, steps=1) -> ElastostaticSolution:
     """Validate, broadcast, solve every sample in compiled code, shape the result."""
     check_arm(arm)
-    q_m, load = _broadcast(check_batch('q_m', q_m, 3, 'rad'),
-                           check_batch(load_name, load, 3, load_unit))
+    q_m = check_batch('q_m', q_m, 3, 'rad')
+    load = check_batch(load_name, load, 3, load_unit)
+    if q_m.shape != load.shape:
+        q_m, load = _broadcast(q_m, load)
     k = check_stiffness(stiffness)
     tol, max_iterations = check_solver_options(tol, max_iterations)
     batch = q_m.shape[:-1]
-    N = math.prod(batch)
-    if q_k0 is None:
-        Q_k0 = np.zeros((N, 4))
-    else:
-        Q_k0 = check_batch('q_k0', q_k0, 4, 'rad')
-        if Q_k0.shape[:-1] != batch:
-            Q_k0 = np.broadcast_to(Q_k0, batch + (4,))
-        Q_k0 = Q_k0.reshape(N, 4)
-    if deflate is None:
-        roots = np.empty((N, 0, 4))
-    else:
-        roots = np.asarray(deflate, dtype=float)
-        if roots.ndim < 2 or roots.shape[-1] != 4 or not np.isfinite(roots).all():
-            raise ValueError(f'expected deflate of shape (..., m, 4) [rad], finite, got shape '
-                             f'{roots.shape}')
-        roots = np.broadcast_to(roots, batch + roots.shape[-2:]).reshape(N, -1, 4)
-    Q_k, F, tips = np.empty((N, 4)), np.empty((N, 3)), np.empty((N, 3))
-    Js = np.empty((N, 6, 7))
-    codes, iterations, residual = np.empty(N, np.int64), np.empty(N, np.int64), np.empty(N)
-    _solve_rows(arm.dh_table, np.ascontiguousarray(q_m.reshape(N, 3)),
-                np.ascontiguousarray(load.reshape(N, 3)), inverse, mode, k,
-                np.ascontiguousarray(Q_k0), np.ascontiguousarray(roots), tol,
-                max_iterations, steps, Q_k, F, tips, Js, codes, iterations, residual)
+    Q_m, loads = _rows(q_m, batch, 3), _rows(load, batch, 3)
+    N = len(Q_m)
+    Q_k0 = np.zeros((N, 4)) if q_k0 is None else _rows(check_batch('q_k0', q_k0, 4, 'rad'),
+                                                         batch, 4)
+    Q_k, F, tips, Js = np.empty((N, 4)), np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 6, 7))
+    counts, residual = np.empty((2, N), np.int64), np.empty(N)
+    _solve_rows(arm.dh_table, Q_m, loads, inverse, mode, k, Q_k0, tol, max_iterations, steps,
+                Q_k, F, tips, Js, counts[0], counts[1], residual)
+    codes, iterations = counts
+    if batch == ():
+        if codes[0] != _CONVERGED:
+            Q_k[0], F[0], tips[0], Js[0] = np.nan, np.nan, np.nan, np.nan
+        return ElastostaticSolution(F[0], Q_k[0], k * Q_k[0], tips[0], Js[0],
+                                    int(iterations[0]), float(residual[0]),
+                                    STATUS_NAMES[codes[0]])
     bad = codes != _CONVERGED
     if bad.any():
         for array in (Q_k, F, tips, Js):
             array[bad] = np.nan
-    status = _STATUS_ARRAY[codes]
-    if batch == ():
-        return ElastostaticSolution(F[0], Q_k[0], k * Q_k[0], tips[0], Js[0],
-                                    int(iterations[0]), float(residual[0]), str(status[0]))
     return ElastostaticSolution(
         F.reshape(batch + (3,)), Q_k.reshape(batch + (4,)), (k * Q_k).reshape(batch + (4,)),
         tips.reshape(batch + (3,)), Js.reshape(batch + (6, 7)), iterations.reshape(batch),
-        residual.reshape(batch), status.reshape(batch))
+        residual.reshape(batch), _STATUS_ARRAY[codes].reshape(batch))
 
 
 def spring_deflections(
@@ -1119,7 +1085,6 @@ def solve_load_newton(
     q_k0: npt.ArrayLike | None = None,
     tol: float = DEFAULT_TOLERANCE,
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
-    deflate: npt.ArrayLike | None = None,
 ) -> ElastostaticSolution:
     """Load and deflections from motor torques by Newton's method on the reduced residual.
 
@@ -1142,10 +1107,6 @@ def solve_load_newton(
         Residual tolerance [N·m], positive.
     max_iterations : int, optional
         Newton iterations allowed, >= 1.
-    deflate : array-like, shape (..., m, 4), optional
-        Known solutions [rad] to stay away from: Newton runs on m(q_k) g(q_k) with the
-        deflation factor m = prod_j (1 / |q_k - r_j|^2 + 1) of Farrell, Birkisson and Funke
-        (SIAM J. Sci. Comput. 37, 2015), so that it converges to another solution or fails.
 
     Returns
     -------
@@ -1158,7 +1119,7 @@ def solve_load_newton(
         tolerances.
     """
     return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, q_k0, tol, max_iterations,
-                inverse=True, deflate=deflate)
+                inverse=True)
 
 
 def solve_load_continuation(
