@@ -606,9 +606,9 @@ class LoadTracker:
         p, n = self._branches, len(self._branches)
         reach = np.maximum(self._reach_factor * self._motion, self._min_reach)[:, None]
         starts = np.concatenate([p, p + reach * self._directions, p - reach * self._directions])
-        solution = solve_load_newton(self._arm, np.broadcast_to(q_m, (3 * n, 3)),
-                                     np.broadcast_to(tau_m, (3 * n, 3)), self._k,
-                                     q_k0=starts, tol=tol, max_iterations=max_iterations)
+        solution = solve_load_newton(self._arm, np.tile(q_m, (3 * n, 1)),
+                                     np.tile(tau_m, (3 * n, 1)), self._k, q_k0=starts,
+                                     tol=tol, max_iterations=max_iterations)
         ok = _admissible(solution, max_force).tolist()
         q_k, previous, moved = solution.q_k.tolist(), p.tolist(), self._motion.tolist()
         rows, motion = [], []

@@ -432,3 +432,21 @@ def test_rigid_arm_is_refused():
 def test_core_imports_without_rclpy():
     code = 'import sys, inflarm_model.elastostatics; assert "rclpy" not in sys.modules'
     subprocess.run([sys.executable, '-c', code], check=True, timeout=120)
+
+
+def test_no_private_name_crosses_a_package():
+    # The finding of the review: the estimator and the IK imported the model's private hot
+    # path (_stable, _solve_springs, ...). Every name one package takes from another is public.
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).parents[2]
+    offenders = []
+    for path in root.glob('inflarm_*/inflarm_*/**/*.py'):
+        package = path.relative_to(root).parts[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith(
+                    'inflarm_') and node.module.split('.')[0] != package:
+                offenders += [f'{path.relative_to(root)}: {node.module}.{alias.name}'
+                              for alias in node.names if alias.name.startswith('_')]
+    assert offenders == []
