@@ -939,10 +939,13 @@ def _solve_rows(dh_table, Q_m, loads, inverse, mode, k, Q_k0, tol, max_iteration
 
 
 def _rows(x: npt.NDArray[np.float64], batch: tuple[int, ...], n: int):
-    """``x`` (batch + (n,), or broadcastable to it) as C-contiguous rows (N, n)."""
+    """``x`` (batch + (n,), or broadcastable to it) as C-contiguous writable rows (N, n).
+
+    Always the same array type, so that the compiled solver has a single specialization.
+    """
     if x.shape[:-1] != batch:
         x = np.broadcast_to(x, batch + (n,))
-    return np.ascontiguousarray(x.reshape(-1, n))
+    return np.require(x.reshape(-1, n), np.float64, ['C', 'W'])
 
 
 def _run(arm, q_m, load, load_name, load_unit, stiffness, q_k0, tol, max_iterations, *,
@@ -953,7 +956,7 @@ def _run(arm, q_m, load, load_name, load_unit, stiffness, q_k0, tol, max_iterati
     load = check_batch(load_name, load, 3, load_unit)
     if q_m.shape != load.shape:
         q_m, load = _broadcast(q_m, load)
-    k = check_stiffness(stiffness)
+    k = np.require(check_stiffness(stiffness), np.float64, ['C', 'W'])
     tol, max_iterations = check_solver_options(tol, max_iterations)
     batch = q_m.shape[:-1]
     Q_m, loads = _rows(q_m, batch, 3), _rows(load, batch, 3)
