@@ -23,7 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'inflarm-characterize = inflarm_model.characterize_cli:main',
-            'robot_description = inflarm_model.nodes.robot_description:main',
+            'robot_description = inflarm_model.executables:robot_description',
         ],
     },
 )

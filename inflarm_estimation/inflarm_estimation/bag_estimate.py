@@ -101,7 +101,8 @@ def read_motor_samples(bag: str, topic: str) -> tuple[np.ndarray, np.ndarray, np
             skipped += 1
             continue
         q = [msg.position[index[joint]] for joint in names]
-        tau = [-msg.effort[index[joint]] for joint in names]  # applied -> load torque
+        # effort is the torque each motor applies (ros2_control); tau_m of eq. 6 is its negative
+        tau = [-msg.effort[index[joint]] for joint in names]
         if not (np.isfinite(q).all() and np.isfinite(tau).all()):
             skipped += 1
             continue

@@ -29,8 +29,7 @@ from inflarm_model.link import TABLE3, wrinkling_moment
 from inflarm_model.urdf import JOINT_LIMITS, MOTOR_JOINT_NAMES, MOTOR_MAX_VELOCITY
 
 # Position limits of the motors [rad], DH joints 1, 2, 5: the URDF's.
-MOTOR_LOWER = np.array([JOINT_LIMITS[name].lower for name in MOTOR_JOINT_NAMES])
-MOTOR_UPPER = np.array([JOINT_LIMITS[name].upper for name in MOTOR_JOINT_NAMES])
+MOTOR_LOWER, MOTOR_UPPER = np.array([JOINT_LIMITS[name] for name in MOTOR_JOINT_NAMES]).T
 
 # A wrinkled link's springs soften, pass after pass, until its moment is within
 # _WRINKLE_TOLERANCE of M_max: the load's lever arm shrinks as the link yields.

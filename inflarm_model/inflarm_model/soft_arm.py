@@ -39,6 +39,11 @@ import numpy.typing as npt
 CHAMBERS = ('PEA', 'B1', 'B2', 'B3', 'B4')
 """Pressure channels in command order; PEA is PEA1 and PEA2 joined by the T-pipe (one pressure)."""
 
+CHAMBER_MAX_PRESSURE = 100e3
+"""Highest gauge pressure a chamber is commanded to [Pa]: the simulated PEA reaches the top of the
+positive-pressure work space (z = 0.99 m) at 100 kPa, and the bellows their full bend below it.
+The default of the controller's output limit and of the simulator's accepted commands."""
+
 BELLOWS_PUSH = {
     'B1': (0.0, -1.0),
     'B2': (-1.0, 0.0),

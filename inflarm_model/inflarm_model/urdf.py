@@ -40,7 +40,6 @@ inflarm_model/urdf`` (a test keeps it equal to ``flexible_arm_urdf()``).
 
 import argparse
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 import math
 from pathlib import Path
 import re
@@ -78,54 +77,49 @@ DEFAULT_WALL_THICKNESS = 0.5e-3  # t [m], prototype of section 3
 FABRIC_DENSITY = 1300.0  # [kg/m^3]
 CAP_MASS = 0.08  # [kg]
 
-
-@dataclass(frozen=True)
-class JointLimit:
-    """Limits of one revolute joint, as written to its URDF ``<limit>``.
-
-    Attributes
-    ----------
-    lower, upper : float
-        Position range [rad].
-    velocity : float
-        Largest speed [rad/s].
-    effort : float
-        Largest torque [N·m].
-    """
-
-    lower: float
-    upper: float
-    velocity: float
-    effort: float
-
-    def clip(self, value: float) -> float:
-        """``value`` [rad] clamped to [lower, upper]."""
-        return min(max(value, self.lower), self.upper)
-
-
 # Largest spring deflection of the pseudo-rigid-body model [rad]: beyond a quarter turn the two
 # bodies of a link would fold onto each other, and nothing of eq. (2) holds.
 SPRING_DEFLECTION_LIMIT = 0.5 * math.pi
-# Motor speed limit [rad/s] of the simulated arm (ArmSimParams.motor_max_velocity's default).
+# Position limits [rad] of every joint, by name: the one table the URDF, the simulated arm, the
+# estimator and the IK check angles against. The paper gives none; ours keep the arm out of
+# itself: the base turns a full turn, the shoulder lifts the first link up to 90 degrees either
+# way, the elbow folds to 150 degrees, and the virtual springs stay within the +-90 degrees where
+# the pseudo-rigid model means anything (SPRING_DEFLECTION_LIMIT, the estimator's model range).
+JOINT_LIMITS = {
+    'joint_1': (-math.pi, math.pi),
+    'joint_2': (-0.5 * math.pi, 0.5 * math.pi),
+    'joint_3': (-2.618, 2.618),
+    **{name: (-SPRING_DEFLECTION_LIMIT, SPRING_DEFLECTION_LIMIT) for name in SPRING_JOINT_NAMES},
+}
+_WIDE_LIMIT = (-math.pi, math.pi)  # joints of other chains (the rigid arm of Table 1)
+# Motor speed limit [rad/s]: the simulated motors' rate limit (ArmSimParams' default).
 MOTOR_MAX_VELOCITY = 1.0
 # Motor torque limit [N·m]: our choice, above the 180 N·m that 150 N at full reach (1.2 m)
 # needs; the simulated motors are not torque-limited.
 MOTOR_MAX_EFFORT = 200.0
-# The paper gives no joint limits. Our choice: the base yaw one full turn; the shoulder from
-# straight down to straight up; the elbow short of folding the links onto each other (at 2.6
-# rad the two 55 mm tubes touch about 0.2 m from the elbow). Springs: the model range, with a
-# speed and torque (k pi/2 at k = 172.71) that are placeholders, as a spring is not driven.
-JOINT_LIMITS: Mapping[str, JointLimit] = {
-    'joint_1': JointLimit(-math.pi, math.pi, MOTOR_MAX_VELOCITY, MOTOR_MAX_EFFORT),
-    'joint_2': JointLimit(-0.5 * math.pi, 0.5 * math.pi, MOTOR_MAX_VELOCITY, MOTOR_MAX_EFFORT),
-    'joint_3': JointLimit(-2.6, 2.6, MOTOR_MAX_VELOCITY, MOTOR_MAX_EFFORT),
-    **{name: JointLimit(-SPRING_DEFLECTION_LIMIT, SPRING_DEFLECTION_LIMIT, 10.0, 271.3)
-       for name in SPRING_JOINT_NAMES},
-}
-# Joints not in JOINT_LIMITS (generic chains): one full turn, never binding.
-_DEFAULT_LIMIT = JointLimit(-math.pi, math.pi, 10.0, 1000.0)
+# A spring is not driven: the speed and torque of its <limit> are placeholders (k pi/2 at
+# k = 172.71 for the torque), as for joints of other chains.
+_SPRING_VELOCITY, _SPRING_EFFORT = 10.0, 271.3
 _FABRIC_RGBA = '0.93 0.93 0.88 1.0'  # PVC-coated fabric, off-white
 _NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_.-]*')
+
+
+def _limit(name: str) -> str:
+    """The URDF ``<limit>`` of joint ``name``: JOINT_LIMITS, and the motors' speed and torque."""
+    lower, upper = JOINT_LIMITS.get(name, _WIDE_LIMIT)
+    velocity, effort = ((MOTOR_MAX_VELOCITY, MOTOR_MAX_EFFORT) if name in MOTOR_JOINT_NAMES
+                        else (_SPRING_VELOCITY, _SPRING_EFFORT))
+    return (f'<limit lower="{_fmt(lower)}" upper="{_fmt(upper)}" effort="{_fmt(effort)}" '
+            f'velocity="{_fmt(velocity)}"/>')
+
+
+def check_joint_positions(names, positions) -> None:
+    """Raise ValueError naming the first joint whose position is outside `JOINT_LIMITS`."""
+    for name, position in zip(names, positions, strict=True):
+        lower, upper = JOINT_LIMITS.get(name, _WIDE_LIMIT)
+        if not lower <= position <= upper:
+            raise ValueError(f'{name} at {position:.6g} rad is outside its limits '
+                             f'[{lower:.4g}, {upper:.4g}] rad')
 
 
 def _positive(name: str, value: float, what: str) -> float:
@@ -348,10 +342,6 @@ def _segment_elements(a: float, d: float, radius: float, thickness: float,
     )
 
 
-def _limit(limit: JointLimit) -> str:
-    return (f'<limit lower="{_fmt(limit.lower)}" upper="{_fmt(limit.upper)}" '
-            f'effort="{_fmt(limit.effort)}" velocity="{_fmt(limit.velocity)}"/>')
-
 
 def dh_chain_urdf(
     robot_name: str,
@@ -435,7 +425,7 @@ def dh_chain_urdf(
             f'    <child link="{child}"/>\n'
             f'    {_origin((prev_a, 0.0, prev_d), (prev_alpha, 0.0, 0.0))}\n'
             '    <axis xyz="0 0 1"/>\n'
-            f'    {_limit(JOINT_LIMITS.get(name, _DEFAULT_LIMIT))}\n'
+            f'    {_limit(name)}\n'
             '  </joint>\n'
         )
         body = _segment_elements(a, d, radius, thickness, caps.get(name))

@@ -182,7 +182,7 @@ def write_loaded_arm_bag(path, force: np.ndarray, n: int = 8):
                     stamp=types['builtin_interfaces/msg/Time'](sec=100 + i, nanosec=0),
                     frame_id='base_link'),
                 name=[f'joint_{j + 1}' for j in order], position=q_m[order],
-                velocity=np.zeros(0), effort=tau_m[order])
+                velocity=np.zeros(0), effort=-tau_m[order])  # the motors apply -tau_m
             bag.write('joint_states', T0 + i, serialize(msg, JOINT_STATE))
             equilibria.append(eq)
         bag.write('report', T0, serialize(string('not a joint state'), STRING))

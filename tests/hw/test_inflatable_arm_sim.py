@@ -104,8 +104,7 @@ def test_targets_are_clamped_to_the_urdf_motor_limits():
     limits = [JOINT_LIMITS[name] for name in FlexibleArm.MOTOR_JOINT_NAMES]
     sim = make_sim(motor_time_constant=0.01, motor_max_velocity=10.0)
     sim.command([4.0, -2.0, 3.0])
-    np.testing.assert_array_equal(sim.target, [limits[0].upper, limits[1].lower,
-                                               limits[2].upper])
+    np.testing.assert_array_equal(sim.target, [limits[0][1], limits[1][0], limits[2][1]])
     for _ in range(200):
         state = sim.step(0.01)
     np.testing.assert_allclose(state.q_m, sim.target, atol=1e-9)

@@ -587,18 +587,19 @@ def test_installed_urdf_is_the_generated_one():
 
 def test_urdf_limits_are_the_one_table():
     from inflarm_model.elastostatics import SPRING_DEFLECTION_LIMIT
-    from inflarm_model.urdf import JOINT_LIMITS
+    from inflarm_model.urdf import JOINT_LIMITS, MOTOR_MAX_EFFORT, MOTOR_MAX_VELOCITY
 
     root = ET.fromstring(flexible_arm_urdf())
     for joint in root.iter('joint'):
         if joint.get('type') != 'revolute':
             continue
-        limit, expected = joint.find('limit'), JOINT_LIMITS[joint.get('name')]
-        assert [float(limit.get(key)) for key in ('lower', 'upper', 'velocity', 'effort')] == [
-            expected.lower, expected.upper, expected.velocity, expected.effort]
+        name, limit = joint.get('name'), joint.find('limit')
+        assert (float(limit.get('lower')), float(limit.get('upper'))) == JOINT_LIMITS[name]
+        if name in FlexibleArm.MOTOR_JOINT_NAMES:  # the simulated motors' rate limit
+            assert float(limit.get('velocity')) == MOTOR_MAX_VELOCITY
+            assert float(limit.get('effort')) == MOTOR_MAX_EFFORT
     for name in FlexibleArm.SPRING_JOINT_NAMES:  # the model range of the estimator
-        assert (JOINT_LIMITS[name].lower, JOINT_LIMITS[name].upper) == (
-            -SPRING_DEFLECTION_LIMIT, SPRING_DEFLECTION_LIMIT)
+        assert JOINT_LIMITS[name] == (-SPRING_DEFLECTION_LIMIT, SPRING_DEFLECTION_LIMIT)
     # The tip link sits at DH frame 7, the end effector of eq. (4).
     model = pin.buildModelFromXML(flexible_arm_urdf())
     data = model.createData()
@@ -608,7 +609,7 @@ def test_urdf_limits_are_the_one_table():
     np.testing.assert_allclose(data.oMf[tip].homogeneous,
                                dh_fk_reference(flexible_dh_table(), q), atol=TOL)
     np.testing.assert_allclose(model.lowerPositionLimit,
-                               [JOINT_LIMITS[n].lower for n in FlexibleArm.JOINT_NAMES])
+                               [JOINT_LIMITS[n][0] for n in FlexibleArm.JOINT_NAMES])
 
 
 def test_urdf_masses_follow_the_stated_assumptions():
