@@ -116,7 +116,8 @@ class LoadPoseEstimate:
     tip_position : ndarray, shape (3,)
         Deflected tip position [m], base frame. NaN unless ``converged``.
     iterations : int
-        Newton steps of the solve that gave the estimate (search excluded).
+        Newton steps of the solve that gave the estimate (that of the direct solve when
+        there is none).
     converged : bool
         True when the estimate is valid: the one admissible solution.
     condition_number : float
@@ -228,7 +229,8 @@ def _fmt(forces) -> str:
 class _Candidates:
     """The admissible solutions of each sample and the solve that found the first."""
 
-    solutions: tuple  # per sample: tuple of (force (3,), q_k (4,), tip (3,), cond) tuples
+    # per sample: (force (3,), q_k (4,), tip (3,), cond, iterations, residual) of each solution
+    solutions: tuple
     main: object  # ElastostaticSolution of the direct solve, (N,)
     rejected: tuple  # per sample: forces of converged but inadmissible solutions
 
@@ -266,6 +268,8 @@ def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candi
     q_ks = [p.q_k.reshape(N, -1, 4) for p in parts]
     tips = [p.tip_position.reshape(N, -1, 3) for p in parts]
     jacobians = [p.jacobian.reshape(N, -1, 6, 7) for p in parts]
+    counts = [np.asarray(p.iterations).reshape(N, -1) for p in parts]
+    residuals = [np.asarray(p.residual).reshape(N, -1) for p in parts]
     # Most starts end on the direct solution: drop those first, then compare the few left.
     first = np.where(keep[0][:, :1, None], q_ks[0][:, :1], np.inf)  # (N, 1, 4)
     for part in range(1, len(parts)):
@@ -277,7 +281,8 @@ def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candi
                 q = q_ks[part][i, j]
                 if all(np.abs(q - other[1]).max() > _SAME for other in found):
                     found.append((forces[part][i, j], q, tips[part][i, j],
-                                  jacobians[part][i, j]))
+                                  jacobians[part][i, j], int(counts[part][i, j]),
+                                  float(residuals[part][i, j])))
             for j in np.flatnonzero(converged[part][i] & ~keep[part][i]):
                 f = forces[part][i, j]
                 if all(np.abs(f - other).max() > 1e-6 for other in others):
@@ -288,7 +293,7 @@ def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candi
     # Condition numbers of the solutions kept (few), not of every start.
     kept = [s[3] for found in solutions for s in found]
     conds = iter(_condition_numbers(np.array(kept)).tolist() if kept else ())
-    solutions = tuple(tuple((f, q, tip, next(conds)) for f, q, tip, _ in found)
+    solutions = tuple(tuple((f, q, tip, next(conds), n, r) for f, q, tip, _, n, r in found)
                       for found in solutions)
     return _Candidates(solutions, main, tuple(rejected))
 
@@ -315,7 +320,7 @@ def _estimates(arm, Q_m, Tau, k, starts, tol, max_iterations, max_condition, max
         iterations, residual = int(main.iterations[i]), float(main.residual[i])
         nan3, nan4 = np.full(3, np.nan), np.full(4, np.nan)
         if len(found) == 1 and found[0][3] <= max_condition:
-            f, q, tip, cond = found[0]
+            f, q, tip, cond, iterations, residual = found[0]
             out.append(LoadPoseEstimate(f.copy(), q.copy(), k * q, tip.copy(), iterations, True,
                                         float(cond), residual, 'converged', ''))
             continue
