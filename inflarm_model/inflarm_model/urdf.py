@@ -31,7 +31,7 @@ Masses. Each body of an inflatable link carries an ``<inertial>`` for its share 
 PVC-coated fabric tube of section 3 (r = 55 mm, t = 0.5 mm, ``FABRIC_DENSITY``) and of the two
 rigid end caps (``CAP_MASS`` each, at the link's ends), and a ``<collision>`` cylinder equal to
 its visual. The paper gives neither the fabric density nor the cap mass; the values are
-assumptions stated where they are defined. A default link weighs 0.29 kg.
+assumptions stated where they are defined. A default link weighs 0.295 kg.
 
 The URDF of the default arm is checked in as ``urdf/inflarm_flexible.urdf`` and installed to
 ``share/inflarm_model/urdf/``; regenerate it with ``python -m inflarm_model.urdf
