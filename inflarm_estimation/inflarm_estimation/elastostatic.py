@@ -13,9 +13,8 @@ report.
 Admissible loads. A solution is admissible when its equilibrium is stable (K - H_kk positive
 definite), every |q_k| is within the model range (``SPRING_DEFLECTION_LIMIT``, pi/2) and
 |f| <= ``max_force`` (default 150 N). Three motor torques do not always determine the load:
-on the paper's arm about 4 % of random configurations loaded with up to 100 N have two or
-three admissible loads that give the same torques (see the package README for how that was
-measured).
+on the paper's arm 3-4 % of random configurations loaded with up to 100 N have two or three
+admissible loads that give the same torques (the package README says how that was measured).
 
 ``estimate_load_and_pose`` (one sample, no history) solves by Newton from the rigid arm
 (continuation if that fails) and searches for other admissible solutions by Newton from the
