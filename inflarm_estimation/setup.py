@@ -22,7 +22,6 @@ setup(
     entry_points={
         'console_scripts': [
             'load_estimator = inflarm_estimation.executables:load_estimator',
-            'inflarm-estimate-bag = inflarm_estimation.bag_estimate:main',
         ],
     },
 )

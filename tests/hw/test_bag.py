@@ -4,7 +4,7 @@ And inflarm-estimate-bag on bags of known loads."""
 import numpy as np
 import pytest
 
-from inflarm_estimation.bag_estimate import main as estimate_bag
+from inflarm_bringup.bag_estimate import main as estimate_bag
 from inflarm_hw.bag import (
     BagWriter,
     TopicQos,

@@ -8,7 +8,7 @@ import pytest
 import rclpy
 from sensor_msgs.msg import JointState
 
-from inflarm_estimation.bag_estimate import main as estimate_bag
+from inflarm_bringup.bag_estimate import main as estimate_bag
 from inflarm_hw.bag import bag_info, deserialize, read_messages
 from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS
 from ros_harness import BaseFrameForces, spin_until
