@@ -44,6 +44,7 @@ from inflarm_model.elastostatics import (
     DEFAULT_TOLERANCE,
     MOTOR_INDICES,
     SPRING_INDICES,
+    LoadSolver,
     check_arm,
     check_rows,
     check_solver_options,
@@ -541,6 +542,7 @@ class LoadTracker:
         if not (math.isfinite(float(reach_factor)) and float(reach_factor) >= 1.0):
             raise ValueError(f'expected reach_factor >= 1, got {reach_factor!r}')
         self._max_motor_step, self._max_torque_step = float(max_motor_step), float(max_torque_step)
+        self._solver = LoadSolver(arm, self._k, tol=tol, max_iterations=max_iterations)
         self._reach_factor, self._min_reach = float(reach_factor), float(min_reach)
         self.reset()
 
@@ -610,9 +612,8 @@ class LoadTracker:
         p, n = self._branches, len(self._branches)
         reach = np.maximum(self._reach_factor * self._motion, self._min_reach)[:, None]
         starts = np.concatenate([p, p + reach * self._directions, p - reach * self._directions])
-        solution = solve_load_newton(self._arm, np.tile(q_m, (3 * n, 1)),
-                                     np.tile(tau_m, (3 * n, 1)), self._k, q_k0=starts,
-                                     tol=tol, max_iterations=max_iterations)
+        solution = self._solver.newton(np.tile(q_m, (3 * n, 1)), np.tile(tau_m, (3 * n, 1)),
+                                       starts)
         ok = _admissible(solution, max_force).tolist()
         q_k, previous, moved = solution.q_k.tolist(), p.tolist(), self._motion.tolist()
         rows, motion = [], []

@@ -68,6 +68,7 @@ __all__ = [
     'SPRING_INDICES',
     'STATUS_NAMES',
     'ElastostaticSolution',
+    'LoadSolver',
     'check_arm',
     'check_batch',
     'check_rows',
@@ -963,9 +964,17 @@ def _run(arm, q_m, load, load_name, load_unit, stiffness, q_k0, tol, max_iterati
     N = len(Q_m)
     Q_k0 = np.zeros((N, 4)) if q_k0 is None else _rows(check_batch('q_k0', q_k0, 4, 'rad'),
                                                          batch, 4)
+    return _solve_and_shape(arm.dh_table, Q_m, loads, k, Q_k0, tol, max_iterations, inverse,
+                            mode, steps, batch)
+
+
+def _solve_and_shape(dh_table, Q_m, loads, k, Q_k0, tol, max_iterations, inverse, mode, steps,
+                     batch) -> ElastostaticSolution:
+    """Solve the checked rows (N, .) in compiled code and shape the result as ``batch``."""
+    N = len(Q_m)
     Q_k, F, tips, Js = np.empty((N, 4)), np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 6, 7))
     counts, residual = np.empty((2, N), np.int64), np.empty(N)
-    _solve_rows(arm.dh_table, Q_m, loads, inverse, mode, k, Q_k0, tol, max_iterations, steps,
+    _solve_rows(dh_table, Q_m, loads, inverse, mode, k, Q_k0, tol, max_iterations, steps,
                 Q_k, F, tips, Js, counts[0], counts[1], residual)
     codes, iterations = counts
     if batch == ():
@@ -1123,6 +1132,51 @@ def solve_load_newton(
     """
     return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, q_k0, tol, max_iterations,
                 inverse=True)
+
+
+class LoadSolver:
+    """``solve_load_newton`` for one arm and stiffness, with its options checked once.
+
+    For a loop of many small solves (``LoadTracker``: a few per sample, at up to 1 kHz), where
+    checking every argument on every call would cost more than the compiled solve itself. The
+    same solver, the same result.
+
+    Parameters
+    ----------
+    arm : FlexibleArm
+    stiffness : float or array-like, shape (4,)
+        [N·m/rad].
+    tol, max_iterations
+        As in ``solve_load_newton``.
+    """
+
+    def __init__(self, arm: object, stiffness: npt.ArrayLike, *, tol: float = DEFAULT_TOLERANCE,
+                 max_iterations: int = DEFAULT_MAX_ITERATIONS) -> None:
+        check_arm(arm)
+        self.arm = arm
+        self.stiffness = np.require(check_stiffness(stiffness), np.float64, ['C', 'W'])
+        self.tol, self.max_iterations = check_solver_options(tol, max_iterations)
+
+    def newton(self, q_m: npt.NDArray[np.float64], tau_m: npt.NDArray[np.float64],
+               q_k0: npt.NDArray[np.float64]) -> ElastostaticSolution:
+        """Newton from ``q_k0``, one row each.
+
+        Parameters
+        ----------
+        q_m, tau_m : ndarray, shape (N, 3)
+            Finite motor angles [rad] and torques [N·m] (the caller checked them).
+        q_k0 : ndarray, shape (N, 4)
+            Finite starts [rad].
+
+        Returns
+        -------
+        ElastostaticSolution
+            Of batch shape (N,).
+        """
+        rows = [np.require(x, np.float64, ['C', 'W']) for x in (q_m, tau_m, q_k0)]
+        return _solve_and_shape(self.arm.dh_table, rows[0], rows[1], self.stiffness, rows[2],
+                                self.tol, self.max_iterations, True, _NEWTON, 1,
+                                (len(rows[0]),))
 
 
 def solve_load_continuation(

@@ -75,5 +75,5 @@ def joint_state(names: Sequence[str], stamp=None, **fields: npt.ArrayLike) -> Jo
         msg.header.stamp = stamp
     for field, values in fields.items():
         if values is not None:
-            setattr(msg, field, [float(v) for v in np.asarray(values, dtype=float)])
+            setattr(msg, field, np.asarray(values, dtype=float).tolist())
     return msg

@@ -36,11 +36,10 @@ class Rig:
         self.node = LoadEstimator(context=executor.context, parameter_overrides=[
             Parameter(k, value=v) for k, v in overrides.items()])
         self.probe = rclpy.create_node('probe', context=executor.context)
-        self.out = {'wrench': [], 'springs': [], 'tip': [], 'links': [], 'diagnostics': [],
+        self.out = {'wrench': [], 'tip': [], 'links': [], 'diagnostics': [],
                     'pose': []}
         for topic, kind, key in (('estimated_wrench', WrenchStamped, 'wrench'),
                                  ('estimated_joint_states', JointState, 'pose'),
-                                 ('spring_deflections', JointState, 'springs'),
                                  ('estimated_tip', PointStamped, 'tip'),
                                  ('link_status', String, 'links'),
                                  ('diagnostics', DiagnosticArray, 'diagnostics')):
@@ -76,14 +75,16 @@ def test_a_sample_yields_load_deflections_tip_and_link_status(executor):
     np.testing.assert_allclose(pose[:3, :3] @ [f.x, f.y, f.z], FORCE, atol=1e-6)
     torque = wrench.wrench.torque
     assert [torque.x, torque.y, torque.z] == [0.0, 0.0, 0.0]  # a pure force at the tip
-    np.testing.assert_allclose(rig.out['springs'][0].position, q_k, atol=1e-9)
     tip = rig.out['tip'][0].point
     np.testing.assert_allclose([tip.x, tip.y, tip.z], pose[:3, 3], atol=1e-9)
-    # The whole deflected pose, every URDF joint, for robot_state_publisher.
+    # The whole deflected pose, every URDF joint, for robot_state_publisher; the efforts
+    # are the motors' torques and the springs' k q_k.
     estimated = rig.out['pose'][0]
     assert list(estimated.name) == list(FlexibleArm.JOINT_NAMES)
     np.testing.assert_allclose(estimated.position, FlexibleArm.assemble_q(q_m, q_k),
                                atol=1e-9)
+    np.testing.assert_allclose(estimated.effort, FlexibleArm.assemble_q(-tau_m, MEAN_STIFFNESS
+                                                                        * q_k), atol=1e-6)
     statuses = [decode(m.data, expected=LinkStatus) for m in rig.out['links']]
     assert [s.link for s in statuses] == ['link_1', 'link_2']
     assert statuses[0].wrinkling_moment == wrinkling_moment(50e3, 0.055)

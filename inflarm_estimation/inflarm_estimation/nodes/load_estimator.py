@@ -2,29 +2,39 @@
 
 Every joint_states sample gives q_m and the torques the motors apply (``effort``, the
 ros2_control convention); their negative is the paper's tau_m, the load torque on the motor
-axes (eq. 6). The elastostatic estimate (``inflarm_estimation.elastostatic``) returns the tip
-force, the spring deflections and the deflected tip. Each link's bending moment is checked
-against the wrinkling moment at its pressure (eq. 3).
+axes (eq. 6). A ``LoadTracker`` (``inflarm_estimation.elastostatic``) follows the branch of
+solutions the stream is on, from sample to sample, and returns the tip force, the spring
+deflections and the deflected tip; it starts cold (a search over every admissible load) on the
+first sample and when the input jumps. Where a second admissible load fits the torques the
+sample is reported 'ambiguous' (in diagnostics, with the loads) and nothing is published for
+it. Each link's bending moment is checked against the wrinkling moment at its pressure (eq. 3).
 
 Subscribes:
-    joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): joint_1..joint_3 with position
-        (within the joint limits) and effort; other joints are ignored.
+    joint_states (sensor_msgs/JointState, JOINT_STATE_QOS with a depth of 100, which absorbs
+        bursts at 1 kHz): joint_1..joint_3 with position (within the joint limits) and
+        effort; other joints are ignored.
 Publishes (only for samples whose estimate converged, stamped with the sample's stamp):
-    estimated_joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): all 7 URDF joints,
-        motors as measured and springs as estimated: robot_state_publisher fed with it draws
-        the deflected arm.
+    estimated_joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): all 7 URDF joints in
+        the URDF's order, motors as measured and springs as estimated: positions [rad] and
+        efforts [N m] (motors: the torque they apply; springs: their elastic torque k q_k,
+        eq. 7). robot_state_publisher fed with it draws the deflected arm.
     estimated_wrench (geometry_msgs/WrenchStamped, RELIABLE_QOS): the tip force [N] in the
         ``tip`` frame (the deflected end of link 2 in the URDF), where its moment is zero.
-    spring_deflections (sensor_msgs/JointState, RELIABLE_QOS): spring_1..spring_4 deflections
-        [rad] and torques [N·m].
     estimated_tip (geometry_msgs/PointStamped, RELIABLE_QOS): deflected tip [m], base frame.
-    link_status (std_msgs/String: LinkStatus JSON, RELIABLE_QOS): one message per link.
+    link_status (std_msgs/String: LinkStatus JSON, RELIABLE_QOS): one message per link for
+        the latest estimate, at ``link_status_rate_hz`` (a link's margin changes slowly; a
+        JSON message per link and sample at 1 kHz would cost more than the estimate).
 Publishes always:
     diagnostics (diagnostic_msgs/DiagnosticArray, about 1 Hz): samples, estimates and
-        rejections since the last report, the latest status and conditioning.
+        rejections since the last report, statuses, cold starts, samples lost in transport,
+        the latest status, alternatives and conditioning.
 Parameters:
     arm.* (inflarm_model.nodes.arm_parameters): geometry, stiffness, link pressure.
     max_condition_number (double): J_m conditioning beyond which no estimate is trusted.
+    max_force_n (double): largest admissible load [N]; a solution above it is no load.
+    jump.motor_step_rad, jump.torque_step_nm (double): a change between samples larger than
+        these restarts the tracker cold.
+    link_status_rate_hz (double, read-only): rate of link_status.
     frame_id (string, read-only): base frame of the outputs.
     tip_frame_id (string, read-only): frame of the estimated wrench.
 """
@@ -37,10 +47,11 @@ from geometry_msgs.msg import PointStamped, WrenchStamped
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from inflarm_estimation.elastostatic import estimate_load_and_pose
+from inflarm_estimation.elastostatic import DEFAULT_MAX_FORCE, LoadTracker
 from inflarm_model.elastostatics import link_moments
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import wrinkling_moment
@@ -49,7 +60,7 @@ from inflarm_model.nodes.arm_parameters import (
     arm_from_parameters,
     check_arm_parameters,
 )
-from inflarm_model.ros_conversions import joint_arrays, joint_state
+from inflarm_model.ros_conversions import joint_arrays
 from inflarm_model.urdf import TIP_LINK
 from inflarm_msgs_json import LinkStatus
 from inflarm_msgs_json.ros.conversions import to_string_msg
@@ -62,17 +73,31 @@ from inflarm_msgs_json.ros.diagnostics import (
 )
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS
+from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS, subscription_events
 from inflarm_msgs_json.ros.spin import spin_node
 
 PARAMETERS = ARM_PARAMETERS + (
     Parameter('max_condition_number', 1e6,
               'condition number of J_m beyond which the configuration counts as singular',
               range=(10.0, 1e12)),
+    Parameter('max_force_n', DEFAULT_MAX_FORCE,
+              'largest admissible tip load [N]: a solution above it is not a load',
+              range=(1.0, 10000.0)),
+    Parameter('jump.motor_step_rad', 0.05,
+              'a motor angle change between samples above this restarts the tracker [rad]',
+              range=(1e-4, 1.0)),
+    Parameter('jump.torque_step_nm', 5.0,
+              'a motor torque change between samples above this restarts the tracker [N m]',
+              range=(1e-3, 100.0)),
+    Parameter('link_status_rate_hz', 10.0, 'rate of link_status [Hz]', range=(0.1, 1000.0),
+              read_only=True),
     Parameter('frame_id', 'base_link', 'base frame of the outputs', read_only=True),
     Parameter('tip_frame_id', TIP_LINK, 'frame of the estimated wrench (URDF tip link)',
               read_only=True),
 )
+# JOINT_STATE_QOS, deeper: a Python callback at 1 kHz must not lose samples to a short stall.
+JOINT_STATE_INPUT_QOS = QoSProfile(depth=100, reliability=JOINT_STATE_QOS.reliability,
+                                   history=JOINT_STATE_QOS.history)
 LINKS = ('link_1', 'link_2')
 MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
 
@@ -86,61 +111,88 @@ class LoadEstimator(GuardedCallbacks, Node):
         if problem is not None:
             raise ValueError(problem)
         self.arm = arm_from_parameters(self.params)
+        self.tracker = self.make_tracker()
         self.statuses: Counter[str] = Counter()  # estimate statuses since the last diagnostics
+        self.samples_total = 0
+        self.lost_total = 0  # samples DDS reports lost before they reached the node
         self.last_estimate = None
+        self.last_pose: tuple[object, np.ndarray, np.ndarray] | None = None  # stamp, q, force
         self.create_guarded_subscription(
-            JointState, 'joint_states', self.on_joint_states, JOINT_STATE_QOS)
+            JointState, 'joint_states', self.on_joint_states, JOINT_STATE_INPUT_QOS,
+            event_callbacks=subscription_events(self, 'joint_states',
+                                                message_lost=self.on_message_lost))
+        # One message of each output, refilled per sample: at 1 kHz building new ones would
+        # cost more than the estimate (rclpy copies a message when it publishes it).
+        self.pose_msg = JointState(name=list(FlexibleArm.JOINT_NAMES))
+        self.wrench_msg = WrenchStamped()
+        self.wrench_msg.header.frame_id = self.params['tip_frame_id']
+        self.tip_msg = PointStamped()
+        self.tip_msg.header.frame_id = self.params['frame_id']
         self.pose_pub = self.create_publisher(JointState, 'estimated_joint_states',
                                               JOINT_STATE_QOS)
         self.wrench_pub = self.create_publisher(WrenchStamped, 'estimated_wrench', RELIABLE_QOS)
-        self.springs_pub = self.create_publisher(JointState, 'spring_deflections', RELIABLE_QOS)
         self.tip_pub = self.create_publisher(PointStamped, 'estimated_tip', RELIABLE_QOS)
         self.link_status_pub = self.create_publisher(String, 'link_status', RELIABLE_QOS)
         self.diagnostics = DiagnosticsPublisher(self, self.diagnostic_status)
+        self.create_guarded_timer(1.0 / self.params['link_status_rate_hz'],
+                                  self.publish_link_status)
         self.add_on_set_parameters_callback(self.on_set_parameters)
-        self.add_post_set_parameters_callback(
-            lambda parameters: self.params.update({q.name: q.value for q in parameters}))
+        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info('ready: estimating the tip load from joint_states')
+
+    def make_tracker(self) -> LoadTracker:
+        p = self.params
+        return LoadTracker(self.arm, p['arm.spring_stiffness'],
+                           max_motor_step=p['jump.motor_step_rad'],
+                           max_torque_step=p['jump.torque_step_nm'],
+                           max_condition=p['max_condition_number'], max_force=p['max_force_n'])
 
     def on_set_parameters(self, parameters) -> SetParametersResult:
         problem = check_arm_parameters({q.name: q.value for q in parameters})
         return SetParametersResult(successful=problem is None, reason=problem or '')
 
+    def on_parameters_set(self, parameters) -> None:
+        self.params.update({q.name: q.value for q in parameters})
+        self.tracker = self.make_tracker()  # a new model: the history no longer applies
+
+    def on_message_lost(self, event) -> None:
+        self.lost_total += event.total_count_change
+
     def on_joint_states(self, msg: JointState) -> None:
         sample = joint_arrays(msg, MOTORS, ('position', 'effort'))
-        q_m, tau_m = sample['position'], -sample['effort']  # effort: the motors' own torque
-        estimate = estimate_load_and_pose(
-            self.arm, q_m, tau_m, self.params['arm.spring_stiffness'],
-            max_condition=self.params['max_condition_number'])
+        q_m, effort = sample['position'], sample['effort']
+        estimate = self.tracker.update(q_m, -effort)  # effort: the torque the motors apply
+        self.samples_total += 1
         self.statuses[estimate.status] += 1
         self.last_estimate = estimate
         if not estimate.converged:
             self.problems.warn('estimate', f'no estimate for this sample: {estimate.reason}',
                                kind=estimate.status)
             return
-        self.publish_estimate(msg.header.stamp, q_m, estimate)
+        self.publish_estimate(msg.header.stamp, q_m, effort, estimate)
 
-    def publish_estimate(self, stamp, q_m: np.ndarray, estimate) -> None:
+    def publish_estimate(self, stamp, q_m: np.ndarray, effort: np.ndarray, estimate) -> None:
         q = FlexibleArm.assemble_q(q_m, estimate.q_k)
-        self.pose_pub.publish(joint_state(FlexibleArm.JOINT_NAMES, stamp, position=q))
-        wrench = WrenchStamped()
-        wrench.header.stamp = stamp
-        wrench.header.frame_id = self.params['tip_frame_id']
+        pose, wrench, tip = self.pose_msg, self.wrench_msg, self.tip_msg
+        pose.header.stamp = wrench.header.stamp = tip.header.stamp = stamp
+        pose.position = q.tolist()
+        pose.effort = FlexibleArm.assemble_q(effort, estimate.tau_k).tolist()
+        self.pose_pub.publish(pose)
         tip_rotation = self.arm.fk(q)[:3, :3]  # tip frame -> base frame
-        wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (
-            tip_rotation.T @ estimate.force).tolist()
+        force = wrench.wrench.force
+        force.x, force.y, force.z = (tip_rotation.T @ estimate.force).tolist()
         self.wrench_pub.publish(wrench)
-        springs = joint_state(FlexibleArm.SPRING_JOINT_NAMES, stamp, position=estimate.q_k,
-                              effort=estimate.tau_k)
-        springs.header.frame_id = self.params['frame_id']
-        self.springs_pub.publish(springs)
-        tip = PointStamped()
-        tip.header.stamp = stamp
-        tip.header.frame_id = self.params['frame_id']
         tip.point.x, tip.point.y, tip.point.z = estimate.tip_position.tolist()
         self.tip_pub.publish(tip)
+        self.last_pose = (stamp, q, estimate.force)
 
-        moments = link_moments(self.arm, q, estimate.force)
+    def publish_link_status(self) -> None:
+        """Each link's bending moment against its wrinkling moment, for the latest estimate."""
+        if self.last_pose is None:
+            return
+        _, q, force = self.last_pose
+        self.last_pose = None  # once per estimate
+        moments = link_moments(self.arm, q, force)
         radius = self.params['arm.link_radius_m']
         for link, pressure, moment in zip(LINKS, self.params['arm.link_pressure_pa'],
                                           moments.tolist(), strict=True):
@@ -167,8 +219,13 @@ class LoadEstimator(GuardedCallbacks, Node):
             message = f'{samples - converged} of {samples} samples without an estimate'
         status = diagnostic_status(
             'load_estimator: elastostatic estimate', 'inflatable_arm', level, message,
-            samples=samples, converged=converged, rejected_samples_total=rejected,
+            samples=samples, converged=converged, samples_total=self.samples_total,
+            rejected_samples_total=rejected, lost_samples_total=self.lost_total,
+            cold_starts_total=self.tracker.cold_starts,
             statuses=dict(self.statuses) or 'none',
+            last_status='none' if estimate is None else estimate.status,
+            last_alternatives='none' if estimate is None else '; '.join(
+                str(f.round(2).tolist()) for f in estimate.alternatives) or 'none',
             last_iterations=0 if estimate is None else estimate.iterations,
             last_condition_number=math.nan if estimate is None else estimate.condition_number)
         self.statuses.clear()

@@ -35,14 +35,15 @@ LATCHED_QOS = QoSProfile(
 )
 
 
-def subscription_events(node: Node, topic: str) -> SubscriptionEventCallbacks:
-    """Callbacks logging an incompatible publisher, which otherwise drops data silently."""
+def subscription_events(node: Node, topic: str, **callbacks) -> SubscriptionEventCallbacks:
+    """Callbacks logging an incompatible publisher, which otherwise drops data silently; other
+    event callbacks (e.g. ``message_lost``) may be added."""
     def on_incompatible(event) -> None:
         node.get_logger().error(
             f"subscription '{topic}': incompatible QoS offered by a publisher "
             f'(policy {event.last_policy_kind}); no data will flow'
         )
-    return SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
+    return SubscriptionEventCallbacks(incompatible_qos=on_incompatible, **callbacks)
 
 
 def publisher_events(node: Node, topic: str) -> PublisherEventCallbacks:
