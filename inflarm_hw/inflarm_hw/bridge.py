@@ -74,7 +74,7 @@ class BridgeConfig:
     max_velocity : float
         Motor slew limit on position targets, and the largest feed-forward [rad/s].
     chamber_pressure_max : float
-        Chamber rating: set points are clamped to ``[0, chamber_pressure_max]`` [Pa].
+        Chamber rating: set points outside ``[0, chamber_pressure_max]`` are rejected [Pa].
     chamber_over_pressure : float
         A chamber reading above this is an ``over_pressure`` fault [Pa].
     link_pressure : tuple of 2 float
