@@ -19,9 +19,8 @@ import time
 import numpy as np
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'scripts'))
 
-from inflarm_launch import NodeProcess, ros_environment, start_node_process  # noqa: E402
+from inflarm_bringup.processes import NodeProcess, ros_environment, start_node_process  # noqa: E402
 
 os.environ.update(ros_environment())
 os.environ.setdefault('ROS_DOMAIN_ID', '97')

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from inflarm_launch import NodeProcess, ProcessGroup
+from inflarm_bringup.processes import NodeProcess, ProcessGroup
 from ros_harness import wait_until
 
 pytestmark = pytest.mark.system
