@@ -1,0 +1,631 @@
+"""Detection and tracking of a yellow ball in BGR images, with a sub-pixel outline.
+
+The vision sensor of ``001_b59ad71c956a1751`` (3.1, 3.3, 4.3.2): an external camera records the
+small yellow ball on the soft arm's end. Pure numpy/OpenCV, no rclpy.
+
+Pipeline of `detect_ball` (one frame, whole image):
+
+1. **Candidates** on a decimated copy (every ``s``-th pixel, ``s`` chosen so that the smallest
+   ball keeps >= 2.5 px of radius): HSV thresholds (``cv2.inRange``), a morphological opening
+   that removes specks, external contours with their holes (``cv2.findContours``, two-level
+   hierarchy). A contour is a candidate if its area fits the radius range, its circularity
+   ``4 pi A / P^2`` and its fill (area without holes / area) are high enough.
+2. **Refinement** of each candidate at full resolution in a region around it
+   (`refine_in_region`, also the tracking step): the thresholded blob gives a first centre and
+   radius; rays cast from that centre sample the image (bilinear, ``cv2.remap``) across the
+   ball's edge, and on each ray the edge is where the signal crosses half-way between the
+   ray's own inside and outside levels (sub-pixel, by linear interpolation).
+   The signal is a colour channel **blind to the ball's colour** (orthogonal in BGR to the
+   ball's colour, measured on its unsaturated pixels): in it the ball is black however it is
+   shaded and the edge is the background being covered, so limb darkening and highlights do
+   not move it. When the background is itself dark in that channel (black, red, yellow
+   surroundings) the **chroma** channel (orthogonal to grey) is used instead.
+3. **Fit**: an ellipse (``cv2.fitEllipseDirect``) through the edge points, refitted twice
+   without the points farther from it than the tolerance (3 robust standard deviations,
+   capped at ``0.5 + 0.03 r`` px). ``confidence`` is the fraction of rays whose edge lies on
+   the final ellipse; a candidate is accepted if it is high enough and the ellipse is not too
+   elongated. The best accepted candidate wins.
+
+`BallTracker` runs step 2 in a region around the last detection (tracking mode) and falls back
+to `detect_ball` on the whole frame when the ball is lost there.
+
+Pixel convention (OpenCV's): pixel ``i`` spans ``[i - 0.5, i + 0.5]``; ``center`` is the centre
+of the fitted ellipse, ``radius`` ``sqrt(a b)`` of its semi-axes (the radius of the disc of equal
+area). For the ball's 3D position use the edge points (`inflarm_vision.geometry.locate_ball`):
+off the optical axis the ellipse's centre is not the image of the ball's centre.
+"""
+
+from dataclasses import dataclass
+import math
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    'BallDetection',
+    'BallTracker',
+    'DetectorParams',
+    'detect_ball',
+    'refine_in_region',
+]
+
+
+def _check_triple(value, name: str, high: int) -> tuple[int, int, int]:
+    v = tuple(value)
+    if len(v) != 3 or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool)
+                              for x in v):
+        raise ValueError(f'expected {name} 3 integers (H, S, V), got {value!r}')
+    limits = (180, 255, 255)
+    if any(x < 0 or x > lim for x, lim in zip(v, limits, strict=True)):
+        raise ValueError(f'expected {name} within H 0-180, S 0-255, V 0-255, got {v}')
+    return tuple(int(x) for x in v)
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """Parameters of the detector, validated on construction (``ValueError`` naming the field).
+
+    Attributes
+    ----------
+    hsv_lower, hsv_upper : tuple of 3 int
+        Inclusive HSV thresholds in OpenCV's ranges (H 0-180, S and V 0-255). The defaults take
+        a yellow ball (hue 17-38, i.e. 34-76 deg) under indoor light from exposure 0.5 to 1.5:
+        dark limbs (V >= 40) and highlights where red and green clip (hue -> 30). Orange (hue
+        about 12) and lime (about 47) are out, so are pale yellows (S < 100).
+    min_radius_px, max_radius_px : float
+        Range of apparent radii [px].
+    min_circularity : float
+        Smallest ``4 pi A / P^2`` of a candidate's thresholded contour (1 for a disc; a digital
+        disc of radius 3 px scores about 0.8, a square 0.785, a half disc 0.75).
+    min_fill : float
+        Smallest fraction of a candidate's contour area that is not holes (rejects rings; a
+        highlight the thresholds miss is a small hole).
+    max_aspect_ratio : float
+        Largest ratio of the fitted ellipse's axes. The image of a sphere at angle ``t`` off the
+        optical axis has a ratio of about ``1 / cos(t)``: 1.15 at 30 deg, 1.31 at 40 deg.
+    min_confidence : float
+        Smallest fraction of the outline found on the fitted ellipse (a half disc scores about
+        0.7).
+    min_chroma : float
+        Smallest distance of the ball's colour from grey [grey levels] (rejects dark, nearly
+        grey blobs whose hue is noise).
+    opening_px : int
+        Size of the square structuring element of the opening on the decimated mask (0: none).
+    max_candidates : int
+        Number of candidates refined per frame, best first.
+    """
+
+    hsv_lower: tuple[int, int, int] = (17, 100, 45)
+    hsv_upper: tuple[int, int, int] = (38, 255, 255)
+    min_radius_px: float = 4.0
+    max_radius_px: float = 150.0
+    min_circularity: float = 0.6
+    min_fill: float = 0.85
+    max_aspect_ratio: float = 1.3
+    min_confidence: float = 0.8
+    min_chroma: float = 20.0
+    opening_px: int = 3
+    max_candidates: int = 4
+
+    def __post_init__(self) -> None:
+        lower = _check_triple(self.hsv_lower, 'hsv_lower', 255)
+        upper = _check_triple(self.hsv_upper, 'hsv_upper', 255)
+        if any(lo > hi for lo, hi in zip(lower, upper, strict=True)):
+            raise ValueError(f'expected hsv_lower <= hsv_upper, got {lower} and {upper}')
+        object.__setattr__(self, 'hsv_lower', lower)
+        object.__setattr__(self, 'hsv_upper', upper)
+        if not (math.isfinite(self.min_radius_px) and self.min_radius_px >= 2.0):
+            raise ValueError(f'expected min_radius_px >= 2 [px], got {self.min_radius_px}')
+        if not (math.isfinite(self.max_radius_px) and self.max_radius_px > self.min_radius_px):
+            raise ValueError(
+                f'expected max_radius_px > min_radius_px = {self.min_radius_px} [px], got '
+                f'{self.max_radius_px}')
+        for name in ('min_circularity', 'min_fill', 'min_confidence'):
+            value = getattr(self, name)
+            if not (0.0 <= value <= 1.0):
+                raise ValueError(f'expected {name} in [0, 1], got {value}')
+        if not (math.isfinite(self.min_chroma) and self.min_chroma >= 0.0):
+            raise ValueError(f'expected min_chroma >= 0 [grey levels], got {self.min_chroma}')
+        if not (math.isfinite(self.max_aspect_ratio) and self.max_aspect_ratio >= 1.0):
+            raise ValueError(f'expected max_aspect_ratio >= 1, got {self.max_aspect_ratio}')
+        for name, low in (('opening_px', 0), ('max_candidates', 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                raise ValueError(f'expected {name} an integer >= {low}, got {value!r}')
+
+    @property
+    def decimation(self) -> int:
+        """Pixel step of the candidate search (1-4): the smallest ball keeps >= 2 px of
+        radius."""
+        return int(min(4, max(1, self.min_radius_px // 2.0)))
+
+
+@dataclass(frozen=True)
+class BallDetection:
+    """A ball found in an image.
+
+    Attributes
+    ----------
+    center : ndarray, shape (2,)
+        ``(u, v)`` centre of the fitted ellipse [px], OpenCV convention.
+    radius : float
+        ``sqrt(a b)`` of the ellipse's semi-axes [px].
+    confidence : float
+        Fraction of the outline's rays whose edge lies on the ellipse, in [0, 1].
+    axes : ndarray, shape (2,)
+        Semi-axes ``(a, b)``, ``a >= b`` [px].
+    angle : float
+        Direction of the major axis from ``+u`` towards ``+v`` [rad].
+    edge_points : ndarray, shape (n, 2)
+        The sub-pixel edge points on the ellipse (inliers) [px], input of 3D localization.
+    colour_bgr : ndarray, shape (3,)
+        The ball's colour measured on its unclipped, unhighlighted pixels [grey levels].
+    blur_px : float
+        Standard deviation of the blur of its edge [px] (about 0.55 for a sharp image:
+        pixel area and interpolation).
+    """
+
+    center: npt.NDArray[np.float64]
+    radius: float
+    confidence: float
+    axes: npt.NDArray[np.float64]
+    angle: float
+    edge_points: npt.NDArray[np.float64]
+    colour_bgr: npt.NDArray[np.float64]
+    blur_px: float
+
+
+# -- refinement --------------------------------------------------------------------------------
+
+_GREY = np.ones(3) / math.sqrt(3.0)
+_SATURATED = 250  # a channel at or above this is treated as clipped
+_STEP = 0.5  # sample spacing along the rays [px]
+_PASSES = 1
+_LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
+
+
+def _unit(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return v / np.linalg.norm(v)
+
+
+def _channels(ball_bgr: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64],
+                                                           npt.NDArray[np.float64]]:
+    """(ball-blind weights, chroma weights): unit BGR vectors with ``blind . ball = 0``,
+    ``blind . grey > 0`` and ``chroma . grey = 0``, ``chroma . ball > 0``."""
+    ball = _unit(ball_bgr)
+    blind = _GREY - (_GREY @ ball) * ball
+    chroma = ball - (ball @ _GREY) * _GREY
+    return _unit(blind), _unit(chroma)
+
+
+def _ball_colour(patch: npt.NDArray[np.uint8], blob: npt.NDArray[np.uint8]) -> npt.NDArray:
+    """BGR colour of the ball: the median direction (shading does not change it) of the blob's
+    pixels away from its edge (no background mixed in), unclipped and without the brightest
+    quarter (highlights), scaled to their median brightness."""
+    core = cv2.erode(blob, np.ones((3, 3), np.uint8))
+    inside = core if cv2.countNonZero(core) >= 8 else blob
+    pixels = patch[inside > 0]
+    pixels = pixels[::max(1, len(pixels) // 400)].astype(np.float64)
+    unclipped = pixels[pixels.max(axis=1) < _SATURATED]
+    pixels = unclipped if len(unclipped) >= 4 else pixels
+    brightness = pixels.sum(axis=1)
+    pixels = pixels[brightness <= np.quantile(brightness, 0.75)]
+    norms = np.maximum(np.linalg.norm(pixels, axis=1, keepdims=True), 1e-9)
+    return np.median(pixels / norms, axis=0) * float(np.median(norms))
+
+
+def _crossing(z: npt.NDArray, start: npt.NDArray | float) -> npt.NDArray[np.float64]:
+    """Per row of normalized profiles ``z`` sampled at ``start + k _STEP``, where they cross
+    0.5 upwards: the mean of the first crossing seen from inside and the first seen from
+    outside (noise makes either early, by as much), NaN without a crossing."""
+    up = (z[:, :-1] < 0.5) & (z[:, 1:] >= 0.5)
+    rows = np.arange(len(z))
+    first = np.argmax(up, axis=1)
+    last = z.shape[1] - 2 - np.argmax(up[:, ::-1], axis=1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        k = np.stack([first, last])
+        z0, z1 = z[rows, k], z[rows, k + 1]
+        position = k + (0.5 - z0) / (z1 - z0)
+    return np.where(up.any(axis=1), start + _STEP * position.mean(axis=0), np.nan)
+
+
+def _normalized(signal: npt.NDArray, lo, hi) -> npt.NDArray:
+    span = np.asarray(hi - lo, dtype=float)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return (signal - np.reshape(lo, (-1, 1))) / np.where(span > 0.0, span, np.nan)[:, None]
+
+
+def _edge_and_width(signal: npt.NDArray, lo, hi, start) -> tuple[npt.NDArray, npt.NDArray]:
+    """Per ray, the half-way crossing of the edge and the distance between its 25 % and 75 %
+    crossings [px] (one `_crossing` call on the three stacked)."""
+    z = _normalized(signal, lo, hi)
+    n = len(z)
+    found = _crossing(np.concatenate([z, z - 0.25, z + 0.25]), np.resize(start, 3 * n))
+    return found[:n], found[n:2 * n] - found[2 * n:]
+
+
+def _line_at(values: npt.NDArray, start: npt.NDArray, at: npt.NDArray) -> npt.NDArray:
+    """Per row, the least-squares line through ``values`` sampled at ``start + k _STEP``,
+    evaluated at ``at``."""
+    j = np.arange(values.shape[1]) - 0.5 * (values.shape[1] - 1)
+    slope = (values @ j) / (j @ j)
+    return values.mean(axis=1) + slope * ((at - start) / _STEP - 0.5 * (values.shape[1] - 1))
+
+
+def _circular_mean(values: npt.NDArray, valid: npt.NDArray, k: int = 2) -> npt.NDArray:
+    """Mean of each ray's value with those of its ``k`` neighbours on either side (the rays go
+    round the ball), over valid rays only."""
+    both = np.stack([np.where(valid, values, 0.0), valid.astype(float)])
+    padded = np.concatenate([both[:, -k:], both, both[:, :k]], axis=1)
+    sums = np.cumsum(padded, axis=1)
+    sums = np.concatenate([sums[:, 2 * k:2 * k + 1], sums[:, 2 * k + 1:] - sums[:, :-2 * k - 1]],
+                          axis=1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(sums[1] > 0, sums[0] / sums[1], values)
+
+
+def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: float,
+           inside_level: float | None,
+           sigma: float | None = None) -> tuple[npt.NDArray[np.float64], float]:
+    """Sub-pixel edge on each ray and the edge's blur (standard deviation [px]).
+
+    ``signal`` (n_rays, n_t) is sampled at ``t0 + k _STEP`` from the ray origin, rising from
+    the ball (inside) to the background (outside). A first pass takes half-way between the
+    levels of the inner and outer parts of the search window ``|t - r0| <= half_width``. Then,
+    twice, the outside level is extrapolated to that edge from a line through the samples
+    just beyond the blurred edge (texture gradients), averaged over neighbouring rays, and so
+    is the inside level unless it is known (``inside_level``: 0 in the ball-blind channel,
+    however the ball is shaded). The blur is the 25 %-75 % width / 1.349, and the edge is
+    moved out by ``sigma^2 / (2 rho)``, by which blur moves the half-way level of a convex
+    outline of radius ``rho`` inwards (the median of a Rice distribution).
+    """
+    n_rays, n_t = signal.shape
+    t = t0 + _STEP * np.arange(n_t)
+    inner = t < r0 - 0.5 * half_width
+    outer = (t > r0 + 0.5 * half_width) & (t <= r0 + half_width)
+    search = np.nonzero(np.abs(t - r0) <= half_width)[0]
+    hi = signal[:, outer].mean(axis=1)
+    lo = (np.full(n_rays, inside_level) if inside_level is not None
+          else signal[:, inner].mean(axis=1) if inner.any() else np.zeros(n_rays))
+    window = signal[:, search[0]:search[-1] + 1]
+    if sigma is None:
+        edge, widths = _edge_and_width(window, lo, hi, t[search[0]])
+        sigma = 0.7
+    else:
+        edge, widths = _crossing(_normalized(window, lo, hi), t[search[0]]), np.array([])
+    rows = np.arange(n_rays)[:, None]
+    length = int(round(_LEVEL_LENGTH / _STEP)) + 1
+    for _ in range(_PASSES):
+        finite = widths[np.isfinite(widths)]
+        if len(finite):
+            estimate = float(np.median(finite)) / 1.349
+            sigma = estimate if estimate > 0.0 else sigma
+        gap = int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
+        valid = np.isfinite(edge)
+        k = np.round((np.where(valid, edge, r0) - t0) / _STEP).astype(np.int64)
+        valid &= (k - gap >= 0) & (k + gap + length < n_t)
+        if not valid.any():
+            return np.full(n_rays, np.nan), sigma
+        k = np.where(valid, k, n_t // 2)
+        e = np.where(valid, edge, t[k])
+        outside = np.minimum(k[:, None] + gap + np.arange(length), n_t - 1)
+        hi = _circular_mean(_line_at(signal[rows, outside], t[outside[:, 0]], e), valid)
+        if inside_level is None:
+            inside = np.minimum(np.maximum(k[:, None] - gap - length + 1, 0)
+                                + np.arange(length), n_t - 1)
+            lo = _circular_mean(_line_at(signal[rows, inside], t[inside[:, 0]], e), valid)
+        around = np.clip(k[:, None] + np.arange(-gap, gap + 1), 0, n_t - 1)
+        edge, widths = _edge_and_width(signal[rows, around], lo, hi, t[around[:, 0]])
+        edge = np.where(valid, edge, np.nan)
+    return edge + sigma * sigma / (2.0 * edge), sigma
+
+
+def _ellipse_distance(fit, origin: npt.NDArray[np.float64],
+                      directions: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Distance from ``origin`` along each unit direction to the ellipse ``fit`` (OpenCV's
+    ``((cx, cy), (width, height), angle_deg)``)."""
+    (cx, cy), (w, h), angle = fit
+    a, b = 0.5 * w, 0.5 * h
+    c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+    # into the ellipse's axes, scaled to the unit circle
+    o = origin - (cx, cy)
+    ox, oy = (c * o[0] + s * o[1]) / a, (-s * o[0] + c * o[1]) / b
+    dx = (c * directions[:, 0] + s * directions[:, 1]) / a
+    dy = (-s * directions[:, 0] + c * directions[:, 1]) / b
+    qa = dx * dx + dy * dy
+    qb = ox * dx + oy * dy
+    qc = ox * ox + oy * oy - 1.0
+    return (-qb + np.sqrt(np.maximum(qb * qb - qa * qc, 0.0))) / qa
+
+
+def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64],
+                 directions: npt.NDArray[np.float64], t: npt.NDArray[np.float64],
+                 radius: float):
+    """Robust ellipse fit through the edge points: (fit, inlier mask) or None.
+
+    Three fits, each without the points farther (along their ray) from the previous ellipse
+    than 3 robust standard deviations, that tolerance kept within [0.25, 0.5 + 0.03 r] px."""
+    valid = np.isfinite(t)
+    inliers = valid
+    cap = 0.5 + 0.03 * radius
+    fit = None
+    for _ in range(3):
+        if inliers.sum() < 8:
+            return None
+        fit = cv2.fitEllipseDirect(points[inliers].astype(np.float32))
+        if not all(math.isfinite(x) for x in (*fit[0], *fit[1])) or min(fit[1]) <= 0.0:
+            return None
+        residual = np.full(len(t), np.inf)
+        residual[valid] = t[valid] - _ellipse_distance(fit, origin, directions[valid])
+        spread = np.median(np.abs(residual[inliers] - np.median(residual[inliers])))
+        tolerance = min(max(3.0 * 1.4826 * spread, 0.25), cap)
+        inliers = np.abs(residual) <= tolerance
+    return fit, inliers
+
+
+def _refine_blob(image: npt.NDArray[np.uint8], patch: npt.NDArray[np.uint8],
+                 blob: npt.NDArray[np.uint8], offset: npt.NDArray[np.float64], moments,
+                 params: DetectorParams,
+                 prior: BallDetection | None = None) -> BallDetection | None:
+    """Sub-pixel outline of one thresholded blob.
+
+    ``patch`` and ``blob`` are the blob's bounding box in the image and its mask, ``offset``
+    the box's corner in the image, ``moments`` those of the blob's contour (box coordinates).
+    A ``prior`` detection (the last frame's) lends its colour and blur (a warm start).
+    """
+    center = offset + (moments['m10'] / moments['m00'], moments['m01'] / moments['m00'])
+    r0 = math.sqrt(moments['m00'] / math.pi)
+    ball_bgr = _ball_colour(patch, blob) if prior is None else prior.colour_bgr
+    if np.linalg.norm(ball_bgr - (ball_bgr @ _GREY) * _GREY) < max(params.min_chroma, 1.0):
+        return None
+    blind, chroma = _channels(ball_bgr)
+
+    n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 128))
+    phi = np.linspace(0.0, 2.0 * math.pi, n_rays, endpoint=False)
+    directions = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    half_width = 0.15 * r0 + 3.0
+    reach = half_width + 10.0  # room for the level windows beyond the search window
+    t0 = max(0.3 * r0, r0 - reach)
+    t = np.arange(t0, r0 + reach + _STEP, _STEP)
+    map_x = (center[0] + np.outer(directions[:, 0], t)).astype(np.float32)
+    map_y = (center[1] + np.outer(directions[:, 1], t)).astype(np.float32)
+    h, w = image.shape[:2]
+    # a ray is usable if its first and last samples are in the image (the ball is convex)
+    ends = np.stack([map_x[:, [0, -1]], map_y[:, [0, -1]]])
+    inside_image = ((ends[0] >= 0.0) & (ends[0] <= w - 1) & (ends[1] >= 0.0)
+                    & (ends[1] <= h - 1)).all(axis=1)
+    samples = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+    # the ball-blind channel, unless the background is dark in it: then chroma
+    signal = samples @ blind.astype(np.float32)
+    outer = (t > r0 + 0.5 * half_width) & (t <= r0 + half_width)
+    inside_level = 0.0
+    if not signal[:, outer].mean() > 0.25 * float(ball_bgr @ chroma):
+        signal = -(samples @ chroma.astype(np.float32))
+        inside_level = None
+    edge, sigma = _edges(signal, t0, r0, half_width, inside_level,
+                         None if prior is None else prior.blur_px)
+    edge = np.where(inside_image, edge, np.nan)
+    points = center + edge[:, None] * directions
+    result = _fit_outline(points, center, directions, edge, r0)
+    if result is None:
+        return None
+    fit, inliers = result
+    (cx, cy), (fw, fh), angle = fit
+    a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)
+    major = math.radians(angle) if fw >= fh else math.radians(angle) + 0.5 * math.pi
+    major = (major + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+    return BallDetection(center=np.array([cx, cy]), radius=math.sqrt(a * b),
+                         confidence=float(inliers.mean()), axes=np.array([a, b]),
+                         angle=major, edge_points=points[inliers], colour_bgr=ball_bgr,
+                         blur_px=sigma)
+
+
+def _accept(detection: BallDetection | None, params: DetectorParams) -> bool:
+    return (detection is not None and detection.confidence >= params.min_confidence
+            and detection.axes[0] <= params.max_aspect_ratio * detection.axes[1]
+            and params.min_radius_px <= detection.radius <= params.max_radius_px)
+
+
+def _blobs(mask: npt.NDArray[np.uint8], scale: float, min_radius_px: float,
+           params: DetectorParams) -> list[tuple[float, npt.NDArray[np.int32], dict]]:
+    """Contours of the mask that may be the ball, best shape first: (score, contour, moments).
+
+    ``scale`` is the mask's pixel size in image pixels; the area must fit the radius range
+    (from ``min_radius_px``), the circularity and the fill (area not in holes) be high enough.
+    """
+    contours, hierarchy = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    if hierarchy is None:
+        return []
+    parents = hierarchy[0][:, 3]
+    min_area = 0.5 * math.pi * (min_radius_px / scale) ** 2
+    max_area = 1.5 * math.pi * (params.max_radius_px / scale) ** 2
+    holes: dict[int, float] = {}
+    for i in np.nonzero(parents >= 0)[0]:
+        holes[parents[i]] = holes.get(parents[i], 0.0) + cv2.contourArea(contours[i])
+    blobs = []
+    for i in np.nonzero(parents < 0)[0]:
+        contour = contours[i]
+        moments = cv2.moments(contour)
+        area = moments['m00']
+        if not (min_area <= area <= max_area):
+            continue
+        # the contour of a digital disc runs through its outer pixels' centres: for blobs of a
+        # few pixels compare the area with the enclosing circle's instead of the perimeter's
+        perimeter = cv2.arcLength(contour, True)
+        circularity = 4.0 * math.pi * area / perimeter ** 2 if perimeter > 0.0 else 0.0
+        if area < 30.0:
+            _, radius = cv2.minEnclosingCircle(contour)
+            circularity = max(circularity, area / (math.pi * radius * radius))
+        fill = 1.0 - holes.get(i, 0.0) / area
+        if circularity >= params.min_circularity and fill >= params.min_fill:
+            blobs.append((circularity * fill, contour, moments))
+    blobs.sort(key=lambda blob: -blob[0])
+    return blobs
+
+
+def _threshold(bgr: npt.NDArray[np.uint8], params: DetectorParams) -> npt.NDArray[np.uint8]:
+    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+    return cv2.inRange(hsv, params.hsv_lower, params.hsv_upper)
+
+
+def _check_image(bgr) -> npt.NDArray[np.uint8]:
+    image = np.asarray(bgr)
+    if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+        raise ValueError(
+            f'expected bgr_image a uint8 array of shape (height, width, 3), got {image.dtype} '
+            f'{image.shape}')
+    if image.shape[0] < 1 or image.shape[1] < 1:
+        raise ValueError(f'expected a non-empty bgr_image, got shape {image.shape}')
+    return image
+
+
+def refine_in_region(bgr_image: npt.ArrayLike, region: tuple[int, int, int, int],
+                     params: DetectorParams = DetectorParams(),  # noqa: B008 (frozen)
+                     near: npt.ArrayLike | None = None, prior: BallDetection | None = None,
+                     max_blobs: int | None = None) -> BallDetection | None:
+    """Detect the ball inside a region of the image, at full resolution.
+
+    Parameters
+    ----------
+    bgr_image : ndarray, shape (height, width, 3), uint8
+    region : tuple of 4 int
+        ``(u0, v0, u1, v1)``: columns ``u0 <= u < u1``, rows ``v0 <= v < v1``, clipped to the
+        image. The ball's blob must lie in it; its edge is sampled in the whole image.
+    params : DetectorParams
+    near : array-like, shape (2,), optional
+        Expected centre [px]: blobs are tried in order of distance from it (default: best
+        shape first).
+    prior : BallDetection, optional
+        The ball's last detection: its colour and blur start the refinement (tracking).
+    max_blobs : int, optional
+        Number of blobs tried (default ``params.max_candidates``).
+
+    Returns
+    -------
+    BallDetection or None
+        The first accepted blob, in image pixel coordinates.
+    """
+    image = _check_image(bgr_image)
+    h, w = image.shape[:2]
+    u0, v0, u1, v1 = (int(x) for x in region)
+    u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
+    if u1 - u0 < 3 or v1 - v0 < 3:
+        return None
+    roi = image[v0:v1, u0:u1]
+    mask = _threshold(roi, params)
+    # at full resolution the threshold may keep a little less than the ball
+    blobs = _blobs(mask, 1.0, 0.5 * params.min_radius_px, params)
+    if near is not None:
+        tx, ty = np.asarray(near, dtype=float) - (u0, v0)
+        blobs.sort(key=lambda blob: math.hypot(blob[2]['m10'] / blob[2]['m00'] - tx,
+                                               blob[2]['m01'] / blob[2]['m00'] - ty))
+    for _, contour, _ in blobs[:params.max_candidates if max_blobs is None else max_blobs]:
+        x, y, bw, bh = cv2.boundingRect(contour)
+        # this blob alone (not its neighbours in the box), without its holes
+        blob = np.zeros((bh, bw), np.uint8)
+        cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(-x, -y))
+        blob &= mask[y:y + bh, x:x + bw]
+        moments = cv2.moments(contour - (x, y))
+        detection = _refine_blob(image, roi[y:y + bh, x:x + bw], blob,
+                                 np.array([u0 + x, v0 + y], dtype=float), moments, params,
+                                 prior)
+        if _accept(detection, params):
+            return detection
+    return None
+
+
+def detect_ball(bgr_image: npt.ArrayLike,
+                params: DetectorParams = DetectorParams()) -> BallDetection | None:  # noqa: B008
+    """Find the yellow ball in a whole BGR image.
+
+    Parameters
+    ----------
+    bgr_image : ndarray, shape (height, width, 3), uint8
+        The image, in OpenCV's BGR channel order.
+    params : DetectorParams
+        Thresholds and shape limits (the defaults suit a yellow ball under indoor light).
+
+    Returns
+    -------
+    BallDetection or None
+        The accepted candidate of highest confidence, or None if there is no yellow ball.
+    """
+    image = _check_image(bgr_image)
+    s = params.decimation
+    h, w = image.shape[:2]
+    small = image if s == 1 else cv2.resize(image, (w // s, h // s),
+                                            interpolation=cv2.INTER_AREA)
+    mask = _threshold(small, params)
+    if params.opening_px > 1:
+        kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+    best = None
+    for _, contour, moments in _blobs(mask, s, params.min_radius_px,
+                                      params)[:params.max_candidates]:
+        x, y, bw, bh = cv2.boundingRect(contour)
+        margin = 0.25 * max(bw, bh) * s + 2 * s + 4
+        region = (int(x * s - margin), int(y * s - margin), int((x + bw) * s + margin),
+                  int((y + bh) * s + margin))
+        center = s * np.array([moments['m10'], moments['m01']]) / moments['m00']
+        detection = refine_in_region(image, region, params, near=center, max_blobs=1)
+        if detection is not None and (best is None or detection.confidence > best.confidence):
+            best = detection
+    return best
+
+
+class BallTracker:
+    """Detects the ball frame after frame, searching near the last detection first.
+
+    Parameters
+    ----------
+    params : DetectorParams
+    search_radii : float
+        Half-size of the tracking region in radii of the last detection, plus
+        ``search_margin_px``.
+    search_margin_px : float
+        Extra half-size of the tracking region [px] (ball motion between frames).
+
+    Attributes
+    ----------
+    last : BallDetection or None
+        The last detection (None when lost).
+    full_frame_searches : int
+        Frames that needed a whole-image search.
+    """
+
+    def __init__(self, params: DetectorParams = DetectorParams(),  # noqa: B008 (frozen)
+                 search_radii: float = 2.0, search_margin_px: float = 16.0) -> None:
+        if not isinstance(params, DetectorParams):
+            raise ValueError(f'expected params a DetectorParams, got {type(params).__name__}')
+        if not (math.isfinite(search_radii) and search_radii >= 1.0):
+            raise ValueError(f'expected search_radii >= 1, got {search_radii}')
+        if not (math.isfinite(search_margin_px) and search_margin_px >= 0.0):
+            raise ValueError(f'expected search_margin_px >= 0 [px], got {search_margin_px}')
+        self.params = params
+        self.search_radii = float(search_radii)
+        self.search_margin_px = float(search_margin_px)
+        self.last: BallDetection | None = None
+        self.full_frame_searches = 0
+
+    def reset(self) -> None:
+        """Forget the last detection: the next frame is searched whole."""
+        self.last = None
+
+    def update(self, bgr_image: npt.ArrayLike) -> BallDetection | None:
+        """Detect the ball in the next frame (tracking region first, then the whole frame)."""
+        image = _check_image(bgr_image)
+        detection = None
+        if self.last is not None:
+            half = self.search_radii * self.last.radius + self.search_margin_px
+            u, v = self.last.center
+            region = (int(math.floor(u - half)), int(math.floor(v - half)),
+                      int(math.ceil(u + half)) + 1, int(math.ceil(v + half)) + 1)
+            detection = refine_in_region(image, region, self.params, near=self.last.center,
+                                         prior=self.last)
+        if detection is None:
+            self.full_frame_searches += 1
+            detection = detect_ball(image, self.params)
+        self.last = detection
+        return detection
