@@ -315,11 +315,14 @@ class SyntheticCamera:
                 cv2.ellipse(layer, center, axes, angle, 0.0, 180.0, 255, -1, cv2.LINE_AA, shift)
             else:  # discs of other hues
                 cv2.circle(layer, center, int(size * scale), 255, -1, cv2.LINE_AA, shift)
-            alpha = layer.astype(np.float32)[:, :, None] / 255.0
-            image *= 1.0 - alpha
-            image += alpha * np.asarray(colour, dtype=np.float32)
+            x, y, bw, bh = cv2.boundingRect(layer)  # composite only where the shape is
+            if bw == 0 or bh == 0:
+                continue
+            box = (slice(y, y + bh), slice(x, x + bw))
+            alpha = layer[box].astype(np.float32)[:, :, None] * (1.0 / 255.0)
+            image[box] += alpha * (np.asarray(colour, dtype=np.float32) - image[box])
             if kind not in others:
-                self.clutter_mask |= layer > 0
+                self.clutter_mask[box] |= layer[box] > 0
 
     # -- frames --------------------------------------------------------------------------------
 

@@ -36,6 +36,7 @@ off the optical axis the ellipse's centre is not the image of the ball's centre.
 """
 
 from dataclasses import dataclass
+import functools
 import math
 
 import cv2
@@ -178,25 +179,39 @@ class BallDetection:
 
 # -- refinement --------------------------------------------------------------------------------
 
-_GREY = np.ones(3) / math.sqrt(3.0)
 _SATURATED = 250  # a channel at or above this is treated as clipped
 _STEP = 0.5  # sample spacing along the rays [px]
-_PASSES = 1
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
-def _unit(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    return v / np.linalg.norm(v)
-
-
-def _channels(ball_bgr: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64],
-                                                           npt.NDArray[np.float64]]:
+def _channels(ball_bgr) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(ball-blind weights, chroma weights): unit BGR vectors with ``blind . ball = 0``,
-    ``blind . grey > 0`` and ``chroma . grey = 0``, ``chroma . ball > 0``."""
-    ball = _unit(ball_bgr)
-    blind = _GREY - (_GREY @ ball) * ball
-    chroma = ball - (ball @ _GREY) * _GREY
-    return _unit(blind), _unit(chroma)
+    ``blind . grey > 0`` and ``chroma . grey = 0``, ``chroma . ball > 0`` (3-vectors: plain
+    floats are faster than numpy here)."""
+    b, g, r = (float(c) for c in ball_bgr)
+    norm = math.sqrt(b * b + g * g + r * r)
+    b, g, r = b / norm, g / norm, r / norm
+    grey = 1.0 / math.sqrt(3.0)
+    along = grey * (b + g + r)  # grey . ball = ball . grey
+    blind = (grey - along * b, grey - along * g, grey - along * r)
+    chroma = (b - along * grey, g - along * grey, r - along * grey)
+    nb = math.sqrt(sum(x * x for x in blind))
+    nc = math.sqrt(sum(x * x for x in chroma))
+    return (np.array(blind, dtype=np.float32) / nb, np.array(chroma, dtype=np.float32) / nc)
+
+
+@functools.lru_cache(maxsize=64)
+def _ray_directions(n: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(cos, sin) of ``n`` directions equally spaced from 0."""
+    phi = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+    return np.cos(phi), np.sin(phi)
+
+
+def _median(values: npt.NDArray) -> float:
+    """Median of a 1-D array (``np.partition``; ``np.median``'s wrappers cost more here)."""
+    n = len(values)
+    part = np.partition(values, [(n - 1) // 2, n // 2])
+    return 0.5 * float(part[(n - 1) // 2] + part[n // 2])
 
 
 def _ball_colour(patch: npt.NDArray[np.uint8], blob: npt.NDArray[np.uint8]) -> npt.NDArray:
@@ -216,108 +231,93 @@ def _ball_colour(patch: npt.NDArray[np.uint8], blob: npt.NDArray[np.uint8]) -> n
 
 
 def _crossing(z: npt.NDArray, start: npt.NDArray | float) -> npt.NDArray[np.float64]:
-    """Per row of normalized profiles ``z`` sampled at ``start + k _STEP``, where they cross
-    0.5 upwards: the mean of the first crossing seen from inside and the first seen from
-    outside (noise makes either early, by as much), NaN without a crossing."""
-    up = (z[:, :-1] < 0.5) & (z[:, 1:] >= 0.5)
-    rows = np.arange(len(z))
-    first = np.argmax(up, axis=1)
-    last = z.shape[1] - 2 - np.argmax(up[:, ::-1], axis=1)
+    """Per row of normalized profiles ``z`` (rising through 0.5) sampled at
+    ``start + k _STEP``, where they cross 0.5: after the samples below 0.5, counted (noise
+    moves that count up and down alike, where a first crossing would come early), by linear
+    interpolation between the two samples around that index. NaN where all samples are on one
+    side."""
+    n, m = z.shape
+    below = (z < 0.5).sum(axis=1)
+    flat = np.arange(0, n * m, m) + np.minimum(np.maximum(below, 1), m - 1)
+    z0, z1 = z.ravel()[flat - 1], z.ravel()[flat]
     with np.errstate(invalid='ignore', divide='ignore'):
-        k = np.stack([first, last])
-        z0, z1 = z[rows, k], z[rows, k + 1]
-        position = k + (0.5 - z0) / (z1 - z0)
-    return np.where(up.any(axis=1), start + _STEP * position.mean(axis=0), np.nan)
+        position = below - 1 + (0.5 - z0) / (z1 - z0)
+    return np.where((below > 0) & (below < m), start + _STEP * position, np.nan)
 
 
 def _normalized(signal: npt.NDArray, lo, hi) -> npt.NDArray:
-    span = np.asarray(hi - lo, dtype=float)
+    """``(signal - lo) / (hi - lo)`` per row (``lo`` a scalar or per row), NaN where
+    ``hi <= lo``."""
+    lo = np.reshape(lo, (-1, 1))
+    span = np.reshape(hi, (-1, 1)) - lo
     with np.errstate(invalid='ignore', divide='ignore'):
-        return (signal - np.reshape(lo, (-1, 1))) / np.where(span > 0.0, span, np.nan)[:, None]
+        return (signal - lo) / np.where(span > 0.0, span, np.nan)
 
 
-def _edge_and_width(signal: npt.NDArray, lo, hi, start) -> tuple[npt.NDArray, npt.NDArray]:
-    """Per ray, the half-way crossing of the edge and the distance between its 25 % and 75 %
-    crossings [px] (one `_crossing` call on the three stacked)."""
-    z = _normalized(signal, lo, hi)
-    n = len(z)
-    found = _crossing(np.concatenate([z, z - 0.25, z + 0.25]), np.resize(start, 3 * n))
-    return found[:n], found[n:2 * n] - found[2 * n:]
-
-
-def _line_at(values: npt.NDArray, start: npt.NDArray, at: npt.NDArray) -> npt.NDArray:
-    """Per row, the least-squares line through ``values`` sampled at ``start + k _STEP``,
-    evaluated at ``at``."""
-    j = np.arange(values.shape[1]) - 0.5 * (values.shape[1] - 1)
-    slope = (values @ j) / (j @ j)
-    return values.mean(axis=1) + slope * ((at - start) / _STEP - 0.5 * (values.shape[1] - 1))
+def _line_at(values: npt.NDArray, offset: int) -> npt.NDArray:
+    """Per row, the least-squares line through ``values`` (sampled every ``_STEP``, the first
+    ``offset`` samples from a point) evaluated at that point."""
+    n = values.shape[1]
+    j = np.arange(n) - 0.5 * (n - 1)
+    return values.sum(axis=1) * (1.0 / n) - (values @ (j / (j @ j))) * (offset + 0.5 * (n - 1))
 
 
 def _circular_mean(values: npt.NDArray, valid: npt.NDArray, k: int = 2) -> npt.NDArray:
     """Mean of each ray's value with those of its ``k`` neighbours on either side (the rays go
-    round the ball), over valid rays only."""
-    both = np.stack([np.where(valid, values, 0.0), valid.astype(float)])
-    padded = np.concatenate([both[:, -k:], both, both[:, :k]], axis=1)
-    sums = np.cumsum(padded, axis=1)
-    sums = np.concatenate([sums[:, 2 * k:2 * k + 1], sums[:, 2 * k + 1:] - sums[:, :-2 * k - 1]],
-                          axis=1)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return np.where(sums[1] > 0, sums[0] / sums[1], values)
+    round the ball); invalid rays count as the mean of the valid ones."""
+    v = np.where(valid, values, values[valid].mean())
+    return np.convolve(np.concatenate([v[-k:], v, v[:k]]), np.full(2 * k + 1, 1.0 / (2 * k + 1)),
+                       'valid')
 
 
 def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: float,
            inside_level: float | None,
-           sigma: float | None = None) -> tuple[npt.NDArray[np.float64], float]:
+           usable: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.float64], float]:
     """Sub-pixel edge on each ray and the edge's blur (standard deviation [px]).
 
     ``signal`` (n_rays, n_t) is sampled at ``t0 + k _STEP`` from the ray origin, rising from
-    the ball (inside) to the background (outside). A first pass takes half-way between the
-    levels of the inner and outer parts of the search window ``|t - r0| <= half_width``. Then,
-    twice, the outside level is extrapolated to that edge from a line through the samples
-    just beyond the blurred edge (texture gradients), averaged over neighbouring rays, and so
-    is the inside level unless it is known (``inside_level``: 0 in the ball-blind channel,
-    however the ball is shaded). The blur is the 25 %-75 % width / 1.349, and the edge is
-    moved out by ``sigma^2 / (2 rho)``, by which blur moves the half-way level of a convex
-    outline of radius ``rho`` inwards (the median of a Rice distribution).
+    the ball (inside) to the background (outside); the first ``usable`` samples of each ray
+    are in the image. A first pass takes half-way between the
+    mean levels of the inner and outer parts of the search window ``|t - r0| <= half_width``,
+    and the blur from the median 25 %-75 % width (1.349 sigma for a Gaussian blur). Then the
+    outside level is extrapolated to that edge from a line through the samples just beyond the
+    blurred edge (texture gradients), averaged over neighbouring rays, and so is the inside
+    level unless it is known (``inside_level``: 0 in the ball-blind channel, however the ball
+    is shaded), and the edge is found again between those levels. Finally it is moved out by
+    ``sigma^2 / (2 rho)``, by which blur moves the half-way level of a convex outline of
+    radius ``rho`` inwards (the median of a Rice distribution).
     """
     n_rays, n_t = signal.shape
-    t = t0 + _STEP * np.arange(n_t)
-    inner = t < r0 - 0.5 * half_width
-    outer = (t > r0 + 0.5 * half_width) & (t <= r0 + half_width)
-    search = np.nonzero(np.abs(t - r0) <= half_width)[0]
-    hi = signal[:, outer].mean(axis=1)
-    lo = (np.full(n_rays, inside_level) if inside_level is not None
-          else signal[:, inner].mean(axis=1) if inner.any() else np.zeros(n_rays))
-    window = signal[:, search[0]:search[-1] + 1]
-    if sigma is None:
-        edge, widths = _edge_and_width(window, lo, hi, t[search[0]])
-        sigma = 0.7
-    else:
-        edge, widths = _crossing(_normalized(window, lo, hi), t[search[0]]), np.array([])
-    rows = np.arange(n_rays)[:, None]
+    # sample index ranges of the search window and of its inner and outer halves
+    lo_k = max(int(math.ceil((r0 - half_width - t0) / _STEP)), 0)
+    hi_k = min(int(math.floor((r0 + half_width - t0) / _STEP)) + 1, n_t)
+    quarter = max(1, (hi_k - lo_k) // 4)
+    hi = signal[:, hi_k - quarter:hi_k].sum(axis=1) * (1.0 / quarter)
+    lo = (inside_level if inside_level is not None
+          else signal[:, lo_k:lo_k + quarter].sum(axis=1) * (1.0 / quarter))
+    z = _normalized(signal[:, lo_k:hi_k], lo, hi)
+    found = _crossing(np.concatenate([z, z - 0.25, z + 0.25]), t0 + _STEP * lo_k)
+    edge, q75, q25 = found[:n_rays], found[n_rays:2 * n_rays], found[2 * n_rays:]
+    widths = (q75 - q25)[np.isfinite(q75) & np.isfinite(q25)]
+    sigma = max(_median(widths) / 1.349, 0.3) if len(widths) else 0.7
+    # local levels around the first edge
     length = int(round(_LEVEL_LENGTH / _STEP)) + 1
-    for _ in range(_PASSES):
-        finite = widths[np.isfinite(widths)]
-        if len(finite):
-            estimate = float(np.median(finite)) / 1.349
-            sigma = estimate if estimate > 0.0 else sigma
-        gap = int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
-        valid = np.isfinite(edge)
-        k = np.round((np.where(valid, edge, r0) - t0) / _STEP).astype(np.int64)
-        valid &= (k - gap >= 0) & (k + gap + length < n_t)
-        if not valid.any():
-            return np.full(n_rays, np.nan), sigma
-        k = np.where(valid, k, n_t // 2)
-        e = np.where(valid, edge, t[k])
-        outside = np.minimum(k[:, None] + gap + np.arange(length), n_t - 1)
-        hi = _circular_mean(_line_at(signal[rows, outside], t[outside[:, 0]], e), valid)
-        if inside_level is None:
-            inside = np.minimum(np.maximum(k[:, None] - gap - length + 1, 0)
-                                + np.arange(length), n_t - 1)
-            lo = _circular_mean(_line_at(signal[rows, inside], t[inside[:, 0]], e), valid)
-        around = np.clip(k[:, None] + np.arange(-gap, gap + 1), 0, n_t - 1)
-        edge, widths = _edge_and_width(signal[rows, around], lo, hi, t[around[:, 0]])
-        edge = np.where(valid, edge, np.nan)
+    gap = int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
+    valid = np.isfinite(edge)
+    k = np.rint((np.where(valid, edge, r0) - t0) / _STEP).astype(np.int64)
+    valid &= (k >= gap) & (k < usable - gap - length)
+    if not valid.any():
+        return np.full(n_rays, np.nan), sigma
+    k = np.where(valid, k, gap)
+    e = t0 + _STEP * k
+    flat = signal.ravel()
+    at = (np.arange(0, n_rays * n_t, n_t) + k)[:, None]  # flat index of each ray's edge sample
+    hi = _circular_mean(_line_at(flat[at + (gap + np.arange(length))], gap), valid)
+    if inside_level is None:
+        start = -min(gap + length - 1, int(k.min()))
+        lo = _circular_mean(_line_at(flat[at + (start + np.arange(length))], start), valid)
+    edge = _crossing(_normalized(flat[at + np.arange(-gap, gap + 1)], lo, hi), e - _STEP * gap)
+    edge = np.where(valid, edge, np.nan)
     return edge + sigma * sigma / (2.0 * edge), sigma
 
 
@@ -344,13 +344,14 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
                  radius: float):
     """Robust ellipse fit through the edge points: (fit, inlier mask) or None.
 
-    Three fits, each without the points farther (along their ray) from the previous ellipse
-    than 3 robust standard deviations, that tolerance kept within [0.25, 0.5 + 0.03 r] px."""
+    A fit through every edge point, then one without the points farther (along their ray)
+    from it than 3 robust standard deviations (the tolerance kept within [0.25, 0.5 + 0.03 r]
+    px); the inliers are those within the tolerance of the second fit."""
     valid = np.isfinite(t)
     inliers = valid
     cap = 0.5 + 0.03 * radius
     fit = None
-    for _ in range(3):
+    for _ in range(2):
         if inliers.sum() < 8:
             return None
         fit = cv2.fitEllipseDirect(points[inliers].astype(np.float32))
@@ -358,7 +359,8 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
             return None
         residual = np.full(len(t), np.inf)
         residual[valid] = t[valid] - _ellipse_distance(fit, origin, directions[valid])
-        spread = np.median(np.abs(residual[inliers] - np.median(residual[inliers])))
+        inner = residual[inliers]
+        spread = _median(np.abs(inner - _median(inner)))
         tolerance = min(max(3.0 * 1.4826 * spread, 0.25), cap)
         inliers = np.abs(residual) <= tolerance
     return fit, inliers
@@ -377,36 +379,34 @@ def _refine_blob(image: npt.NDArray[np.uint8], patch: npt.NDArray[np.uint8],
     center = offset + (moments['m10'] / moments['m00'], moments['m01'] / moments['m00'])
     r0 = math.sqrt(moments['m00'] / math.pi)
     ball_bgr = _ball_colour(patch, blob) if prior is None else prior.colour_bgr
-    if np.linalg.norm(ball_bgr - (ball_bgr @ _GREY) * _GREY) < max(params.min_chroma, 1.0):
+    if np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma, 1.0):
         return None
     blind, chroma = _channels(ball_bgr)
 
-    n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 128))
-    phi = np.linspace(0.0, 2.0 * math.pi, n_rays, endpoint=False)
-    directions = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
+    cos, sin = _ray_directions(n_rays)
     half_width = 0.15 * r0 + 3.0
-    reach = half_width + 10.0  # room for the level windows beyond the search window
+    reach = half_width + 8.0  # room for the level windows beyond the search window
     t0 = max(0.3 * r0, r0 - reach)
     t = np.arange(t0, r0 + reach + _STEP, _STEP)
-    map_x = (center[0] + np.outer(directions[:, 0], t)).astype(np.float32)
-    map_y = (center[1] + np.outer(directions[:, 1], t)).astype(np.float32)
+    map_x = (center[0] + np.outer(cos, t)).astype(np.float32)
+    map_y = (center[1] + np.outer(sin, t)).astype(np.float32)
     h, w = image.shape[:2]
-    # a ray is usable if its first and last samples are in the image (the ball is convex)
-    ends = np.stack([map_x[:, [0, -1]], map_y[:, [0, -1]]])
-    inside_image = ((ends[0] >= 0.0) & (ends[0] <= w - 1) & (ends[1] >= 0.0)
-                    & (ends[1] <= h - 1)).all(axis=1)
+    # samples beyond the image (the ball near its border) must not be used: count, per ray,
+    # those inside from the start (the image is convex and the rays start inside the blob)
+    in_image = np.count_nonzero((map_x >= 0.0) & (map_x <= w - 1) & (map_y >= 0.0)
+                                & (map_y <= h - 1), axis=1)
     samples = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+                        borderMode=cv2.BORDER_REPLICATE)
     # the ball-blind channel, unless the background is dark in it: then chroma
-    signal = samples @ blind.astype(np.float32)
+    signal = samples @ blind
     outer = (t > r0 + 0.5 * half_width) & (t <= r0 + half_width)
     inside_level = 0.0
-    if not signal[:, outer].mean() > 0.25 * float(ball_bgr @ chroma):
-        signal = -(samples @ chroma.astype(np.float32))
+    if not signal[:, outer].mean() > 0.25 * float(np.dot(ball_bgr, chroma)):
+        signal = -(samples @ chroma)
         inside_level = None
-    edge, sigma = _edges(signal, t0, r0, half_width, inside_level,
-                         None if prior is None else prior.blur_px)
-    edge = np.where(inside_image, edge, np.nan)
+    edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image)
+    directions = np.stack([cos, sin], axis=1)
     points = center + edge[:, None] * directions
     result = _fit_outline(points, center, directions, edge, r0)
     if result is None:
@@ -426,6 +426,25 @@ def _accept(detection: BallDetection | None, params: DetectorParams) -> bool:
     return (detection is not None and detection.confidence >= params.min_confidence
             and detection.axes[0] <= params.max_aspect_ratio * detection.axes[1]
             and params.min_radius_px <= detection.radius <= params.max_radius_px)
+
+
+def _elliptic(contour: npt.NDArray[np.int32], max_aspect_ratio: float) -> bool:
+    """Whether a blob's pixel contour is close to an ellipse that is not too elongated: no
+    point farther than ``1 + 0.12 r`` px from the ellipse fitted through them (squares,
+    triangles and half discs are farther), an axis ratio within 1.15 times the limit."""
+    if len(contour) < 6:
+        return True  # a few pixels: left to the sub-pixel fit
+    (cx, cy), (w, h), angle = cv2.fitEllipseDirect(contour)
+    if not (math.isfinite(w) and math.isfinite(h)) or min(w, h) <= 0.0:
+        return False
+    a, b = 0.5 * w, 0.5 * h
+    if max(a, b) > 1.15 * max_aspect_ratio * min(a, b) + 1.0:
+        return False
+    c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+    d = contour[:, 0, :] - (cx, cy)
+    rho = np.hypot((c * d[:, 0] + s * d[:, 1]) / a, (c * d[:, 1] - s * d[:, 0]) / b)
+    radius = math.sqrt(a * b)
+    return float(np.abs(rho - 1.0).max()) * radius <= 1.0 + 0.12 * radius
 
 
 def _blobs(mask: npt.NDArray[np.uint8], scale: float, min_radius_px: float,
@@ -459,7 +478,8 @@ def _blobs(mask: npt.NDArray[np.uint8], scale: float, min_radius_px: float,
             _, radius = cv2.minEnclosingCircle(contour)
             circularity = max(circularity, area / (math.pi * radius * radius))
         fill = 1.0 - holes.get(i, 0.0) / area
-        if circularity >= params.min_circularity and fill >= params.min_fill:
+        if (circularity >= params.min_circularity and fill >= params.min_fill
+                and _elliptic(contour, params.max_aspect_ratio)):
             blobs.append((circularity * fill, contour, moments))
     blobs.sort(key=lambda blob: -blob[0])
     return blobs
