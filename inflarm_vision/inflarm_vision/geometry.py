@@ -98,9 +98,9 @@ def locate_ball(edge_points, camera: PinholeCamera, ball_radius: float) -> BallL
     if not (math.isfinite(ball_radius) and ball_radius > 0.0):
         raise ValueError(f'expected ball_radius > 0 [m], got {ball_radius}')
     rays = pixel_rays(camera, points)
-    n, *_ = np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)
+    n, _, rank, _ = np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)
     norm2 = float(n @ n)
-    if not (math.isfinite(norm2) and norm2 > 1.0):
+    if rank < 3 or not (math.isfinite(norm2) and norm2 > 1.0):
         raise ValueError('edge_points do not outline a cone of rays (a ball) in front of the '
                          'camera')
     cos_a = 1.0 / math.sqrt(norm2)

@@ -71,9 +71,10 @@ class DetectorParams:
     ----------
     hsv_lower, hsv_upper : tuple of 3 int
         Inclusive HSV thresholds in OpenCV's ranges (H 0-180, S and V 0-255). The defaults take
-        a yellow ball (hue 17-38, i.e. 34-76 deg) under indoor light from exposure 0.5 to 1.5:
-        dark limbs (V >= 40) and highlights where red and green clip (hue -> 30). Orange (hue
-        about 12) and lime (about 47) are out, so are pale yellows (S < 100).
+        a yellow ball (hue 17-38, i.e. 34-76 deg) under indoor light from exposure 0.5 to 1.7:
+        dark limbs (V >= 45) and highlights where red and green clip (hue -> 30). Orange (hue
+        about 10) and lime (about 47) are out, so are pale yellows and dark browns (S < 130:
+        a yellow ball's saturation, about 0.9, does not change with its shading).
     min_radius_px, max_radius_px : float
         Range of apparent radii [px].
     min_circularity : float
@@ -97,7 +98,7 @@ class DetectorParams:
         Number of candidates refined per frame, best first.
     """
 
-    hsv_lower: tuple[int, int, int] = (17, 100, 45)
+    hsv_lower: tuple[int, int, int] = (17, 130, 45)
     hsv_upper: tuple[int, int, int] = (38, 255, 255)
     min_radius_px: float = 4.0
     max_radius_px: float = 150.0
@@ -241,7 +242,8 @@ def _crossing(z: npt.NDArray, start: npt.NDArray | float) -> npt.NDArray[np.floa
     flat = np.arange(0, n * m, m) + np.minimum(np.maximum(below, 1), m - 1)
     z0, z1 = z.ravel()[flat - 1], z.ravel()[flat]
     with np.errstate(invalid='ignore', divide='ignore'):
-        position = below - 1 + (0.5 - z0) / (z1 - z0)
+        # within the two samples (noise can make them both fall on one side of 0.5)
+        position = below - 1 + np.minimum(np.maximum((0.5 - z0) / (z1 - z0), 0.0), 1.0)
     return np.where((below > 0) & (below < m), start + _STEP * position, np.nan)
 
 
@@ -271,15 +273,16 @@ def _circular_mean(values: npt.NDArray, valid: npt.NDArray, k: int = 2) -> npt.N
 
 
 def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: float,
-           inside_level: float | None,
-           usable: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.float64], float]:
+           inside_level: float | None, usable: npt.NDArray[np.int64] | int,
+           sigma: float | None = None) -> tuple[npt.NDArray[np.float64], float]:
     """Sub-pixel edge on each ray and the edge's blur (standard deviation [px]).
 
     ``signal`` (n_rays, n_t) is sampled at ``t0 + k _STEP`` from the ray origin, rising from
     the ball (inside) to the background (outside); the first ``usable`` samples of each ray
     are in the image. A first pass takes half-way between the
     mean levels of the inner and outer parts of the search window ``|t - r0| <= half_width``,
-    and the blur from the median 25 %-75 % width (1.349 sigma for a Gaussian blur). Then the
+    and the blur from the median 25 %-75 % width (1.349 sigma for a Gaussian blur) unless
+    ``sigma`` is given (tracking: the blur measured a few frames ago). Then the
     outside level is extrapolated to that edge from a line through the samples just beyond the
     blurred edge (texture gradients), averaged over neighbouring rays, and so is the inside
     level unless it is known (``inside_level``: 0 in the ball-blind channel, however the ball
@@ -296,10 +299,13 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     lo = (inside_level if inside_level is not None
           else signal[:, lo_k:lo_k + quarter].sum(axis=1) * (1.0 / quarter))
     z = _normalized(signal[:, lo_k:hi_k], lo, hi)
-    found = _crossing(np.concatenate([z, z - 0.25, z + 0.25]), t0 + _STEP * lo_k)
-    edge, q75, q25 = found[:n_rays], found[n_rays:2 * n_rays], found[2 * n_rays:]
-    widths = (q75 - q25)[np.isfinite(q75) & np.isfinite(q25)]
-    sigma = max(_median(widths) / 1.349, 0.3) if len(widths) else 0.7
+    if sigma is None:
+        found = _crossing(np.concatenate([z, z - 0.25, z + 0.25]), t0 + _STEP * lo_k)
+        edge, q75, q25 = found[:n_rays], found[n_rays:2 * n_rays], found[2 * n_rays:]
+        widths = (q75 - q25)[np.isfinite(q75) & np.isfinite(q25)]
+        sigma = max(_median(widths) / 1.349, 0.3) if len(widths) else 0.7
+    else:
+        edge = _crossing(z, t0 + _STEP * lo_k)
     # local levels around the first edge
     length = int(round(_LEVEL_LENGTH / _STEP)) + 1
     gap = int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
@@ -344,11 +350,14 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
                  radius: float):
     """Robust ellipse fit through the edge points: (fit, inlier mask) or None.
 
-    A fit through every edge point, then one without the points farther (along their ray)
-    from it than 3 robust standard deviations (the tolerance kept within [0.25, 0.5 + 0.03 r]
-    px); the inliers are those within the tolerance of the second fit."""
+    A fit through the edge points near the median distance, then one without the points
+    farther (along their ray) from it than 3 robust standard deviations (the tolerance kept
+    within [0.25, 0.5 + 0.03 r] px); the inliers are those within the tolerance of the second
+    fit."""
     valid = np.isfinite(t)
-    inliers = valid
+    # a first cut around the median distance (the outline is no more elongated than 1.4:1)
+    inliers = valid & (np.abs(t - _median(t[valid])) <= 0.2 * radius + 2.0) if valid.any() \
+        else valid
     cap = 0.5 + 0.03 * radius
     fit = None
     for _ in range(2):
@@ -362,7 +371,10 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
         inner = residual[inliers]
         spread = _median(np.abs(inner - _median(inner)))
         tolerance = min(max(3.0 * 1.4826 * spread, 0.25), cap)
+        fitted = inliers
         inliers = np.abs(residual) <= tolerance
+        if np.array_equal(inliers, fitted):
+            break  # no point to drop: the fit stands
     return fit, inliers
 
 
@@ -370,22 +382,31 @@ def _refine_blob(image: npt.NDArray[np.uint8], patch: npt.NDArray[np.uint8],
                  blob: npt.NDArray[np.uint8], offset: npt.NDArray[np.float64], moments,
                  params: DetectorParams,
                  prior: BallDetection | None = None) -> BallDetection | None:
-    """Sub-pixel outline of one thresholded blob.
+    """Sub-pixel outline of one thresholded blob (`_refine_at` from its centroid and area).
 
     ``patch`` and ``blob`` are the blob's bounding box in the image and its mask, ``offset``
     the box's corner in the image, ``moments`` those of the blob's contour (box coordinates).
-    A ``prior`` detection (the last frame's) lends its colour and blur (a warm start).
+    A ``prior`` detection (the last frame's) lends its colour (a warm start).
     """
     center = offset + (moments['m10'] / moments['m00'], moments['m01'] / moments['m00'])
     r0 = math.sqrt(moments['m00'] / math.pi)
     ball_bgr = _ball_colour(patch, blob) if prior is None else prior.colour_bgr
+    return _refine_at(image, center, r0, ball_bgr, params)
+
+
+def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
+               ball_bgr: npt.NDArray[np.float64], params: DetectorParams,
+               margin_px: float = 0.0, sigma: float | None = None) -> BallDetection | None:
+    """Sub-pixel outline of a ball of colour ``ball_bgr`` near ``center`` with a radius near
+    ``r0`` [px]: rays from ``center``, their edges (`_edges`, searched within
+    ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust ellipse fit (`_fit_outline`). None if
+    the colour is too grey or the inside of the outline is not of that colour."""
     if np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma, 1.0):
         return None
     blind, chroma = _channels(ball_bgr)
-
     n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
     cos, sin = _ray_directions(n_rays)
-    half_width = 0.15 * r0 + 3.0
+    half_width = 0.15 * r0 + 3.0 + margin_px
     reach = half_width + 8.0  # room for the level windows beyond the search window
     t0 = max(0.3 * r0, r0 - reach)
     t = np.arange(t0, r0 + reach + _STEP, _STEP)
@@ -393,19 +414,28 @@ def _refine_blob(image: npt.NDArray[np.uint8], patch: npt.NDArray[np.uint8],
     map_y = (center[1] + np.outer(sin, t)).astype(np.float32)
     h, w = image.shape[:2]
     # samples beyond the image (the ball near its border) must not be used: count, per ray,
-    # those inside from the start (the image is convex and the rays start inside the blob)
-    in_image = np.count_nonzero((map_x >= 0.0) & (map_x <= w - 1) & (map_y >= 0.0)
-                                & (map_y <= h - 1), axis=1)
+    # those inside from the start (the image is convex and the rays start inside the ball)
+    end = t[-1]
+    if (end <= center[0] <= w - 1 - end) and (end <= center[1] <= h - 1 - end):
+        in_image = len(t)
+    else:
+        in_image = np.count_nonzero((map_x >= 0.0) & (map_x <= w - 1) & (map_y >= 0.0)
+                                    & (map_y <= h - 1), axis=1)
     samples = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
                         borderMode=cv2.BORDER_REPLICATE)
+    # inside, the chroma of the ball's colour (a dark or grey round thing is no ball)
+    strength = float(np.dot(ball_bgr, chroma))
+    inner = max(1, int((r0 - half_width - t0) / _STEP))
+    if not (samples[:, :inner] @ chroma).mean() > 0.5 * strength:
+        return None
     # the ball-blind channel, unless the background is dark in it: then chroma
     signal = samples @ blind
     outer = (t > r0 + 0.5 * half_width) & (t <= r0 + half_width)
     inside_level = 0.0
-    if not signal[:, outer].mean() > 0.25 * float(np.dot(ball_bgr, chroma)):
+    if not signal[:, outer].mean() > 0.25 * strength:
         signal = -(samples @ chroma)
         inside_level = None
-    edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image)
+    edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma)
     directions = np.stack([cos, sin], axis=1)
     points = center + edge[:, None] * directions
     result = _fit_outline(points, center, directions, edge, r0)
@@ -628,24 +658,44 @@ class BallTracker:
         self.search_margin_px = float(search_margin_px)
         self.last: BallDetection | None = None
         self.full_frame_searches = 0
+        self._previous: npt.NDArray[np.float64] | None = None  # centre before the last
+        self._frames = 0
 
     def reset(self) -> None:
         """Forget the last detection: the next frame is searched whole."""
         self.last = None
+        self._previous = None
 
     def update(self, bgr_image: npt.ArrayLike) -> BallDetection | None:
-        """Detect the ball in the next frame (tracking region first, then the whole frame)."""
+        """Detect the ball in the next frame.
+
+        With a last detection: first its outline is refined at the position predicted from
+        the last two (half the last motion again), with its colour and blur (the blur is
+        measured again every 16th frame); then the thresholded blobs of the tracking region are
+        tried; last, the whole frame (`detect_ball`).
+        """
         image = _check_image(bgr_image)
         detection = None
-        if self.last is not None:
-            half = self.search_radii * self.last.radius + self.search_margin_px
-            u, v = self.last.center
-            region = (int(math.floor(u - half)), int(math.floor(v - half)),
-                      int(math.ceil(u + half)) + 1, int(math.ceil(v + half)) + 1)
-            detection = refine_in_region(image, region, self.params, near=self.last.center,
-                                         prior=self.last)
+        last = self.last
+        if last is not None:
+            # half the last motion: smooth arm motion continues, a jittery one averages out
+            velocity = (np.zeros(2) if self._previous is None
+                        else 0.5 * (last.center - self._previous))
+            self._frames += 1
+            sigma = None if self._frames % 16 == 0 else last.blur_px
+            detection = _refine_at(image, last.center + velocity, last.radius, last.colour_bgr,
+                                   self.params, margin_px=1.0 + float(np.hypot(*velocity)),
+                                   sigma=sigma)
+            if not _accept(detection, self.params):
+                half = self.search_radii * last.radius + self.search_margin_px
+                u, v = last.center + velocity
+                region = (int(math.floor(u - half)), int(math.floor(v - half)),
+                          int(math.ceil(u + half)) + 1, int(math.ceil(v + half)) + 1)
+                detection = refine_in_region(image, region, self.params, near=(u, v),
+                                             prior=last)
         if detection is None:
             self.full_frame_searches += 1
             detection = detect_ball(image, self.params)
+        self._previous = None if detection is None or last is None else last.center
         self.last = detection
         return detection

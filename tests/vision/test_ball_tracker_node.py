@@ -168,7 +168,7 @@ def test_parameters_are_validated_and_applied_at_runtime(executor, ros_context):
     rig = Rig(executor)
     node = rig.node
     assert node.get_parameter('frame_id').value == 'sra_mount'
-    assert list(node.get_parameter('detector.hsv_lower').value) == [17, 100, 45]
+    assert list(node.get_parameter('detector.hsv_lower').value) == [17, 130, 45]
     bad = node.set_parameters([Parameter('detector.hsv_upper', value=[10, 255, 255])])[0]
     assert not bad.successful and 'hsv_lower <= hsv_upper' in bad.reason
     bad = node.set_parameters([Parameter('camera.rotation_xyzw', value=[0.0, 0.0, 0.0, 0.0])])[0]
