@@ -614,12 +614,26 @@ def detect_ball(bgr_image: npt.ArrayLike,
     best = None
     for _, contour, moments in _blobs(mask, s, params.min_radius_px,
                                       params)[:params.max_candidates]:
+        # the outline straight from the candidate (its centroid and area in the decimated
+        # image), else from its blob thresholded again at full resolution
         x, y, bw, bh = cv2.boundingRect(contour)
-        margin = 0.25 * max(bw, bh) * s + 2 * s + 4
-        region = (int(x * s - margin), int(y * s - margin), int((x + bw) * s + margin),
-                  int((y + bh) * s + margin))
-        center = s * np.array([moments['m10'], moments['m01']]) / moments['m00']
-        detection = refine_in_region(image, region, params, near=center, max_blobs=1)
+        blob = np.zeros((bh, bw), np.uint8)
+        cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(-x, -y))
+        blob &= mask[y:y + bh, x:x + bw]
+        # pixel i of the decimated image covers image pixels s i .. s i + s - 1
+        center = s * np.array([moments['m10'], moments['m01']]) / moments['m00'] + 0.5 * (s - 1)
+        patch = image[y * s:(y + bh) * s, x * s:(x + bw) * s]
+        if s > 1:  # the colour from full-resolution pixels: fewer are mixed with others
+            blob = cv2.resize(blob, (patch.shape[1], patch.shape[0]),
+                              interpolation=cv2.INTER_NEAREST) & _threshold(patch, params)
+        colour = _ball_colour(patch, blob)
+        detection = _refine_at(image, center, s * math.sqrt(moments['m00'] / math.pi), colour,
+                               params, margin_px=float(s))
+        if not _accept(detection, params):
+            margin = 0.25 * max(bw, bh) * s + 2 * s + 4
+            region = (int(x * s - margin), int(y * s - margin), int((x + bw) * s + margin),
+                      int((y + bh) * s + margin))
+            detection = refine_in_region(image, region, params, near=center, max_blobs=1)
         if detection is not None and (best is None or detection.confidence > best.confidence):
             best = detection
     return best

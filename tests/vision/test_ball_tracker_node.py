@@ -86,9 +86,10 @@ def test_an_image_gives_the_ball_centre_in_sra_mount_stamped_with_the_image(exec
         got = next(p for p in rig.points if p.header.stamp.sec == 10 + k)
         assert got.header.frame_id == 'sra_mount'
         position = np.array([got.point.x, got.point.y, got.point.z])
-        # 40 mm ball at 1.1 m with f = 450 px (about 8 px radius): a few mm, mostly depth (y)
-        assert np.linalg.norm(position - truth) < 0.006, (position, truth)
-        assert abs(position[0] - truth[0]) < 0.001 and abs(position[2] - truth[2]) < 0.001
+        # a 40 mm ball at 1.1 m with f = 450 px (about 8 px radius): a few mm, mostly along the
+        # line of sight (y; 0.05 px of radius is 7 mm); across it, a fraction of a millimetre
+        assert np.linalg.norm(position - truth) < 0.012, (position, truth)
+        assert abs(position[0] - truth[0]) < 0.0015 and abs(position[2] - truth[2]) < 0.0015
 
 
 def test_rgb8_and_yuyv_images_work_too(executor):
