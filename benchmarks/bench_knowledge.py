@@ -28,6 +28,7 @@ from inflarm_control.knowledge import (
     build_knowledge_database,
     nearest_knowledge_point,
 )
+from inflarm_hw.sra_plant import SoftArmPlant
 
 LOOKUP_TARGET_US = 10.0
 OPEN_TARGET_MS = 50.0
@@ -115,7 +116,8 @@ def bench_full_build(tmp: Path, batch_size: int | None, workers: int) -> None:
     path = tmp / 'built.db'
     kwargs = {} if batch_size is None else {'batch_size': batch_size}
     t0 = time.perf_counter()
-    db = build_knowledge_database(path, progress=True, workers=workers, **kwargs)
+    db = build_knowledge_database(path, plant_factory=SoftArmPlant, progress=True,
+                                  workers=workers, **kwargs)
     wall = time.perf_counter() - t0
     print(
         f'full build           {wall:8.1f} s    {db.n_filled} points x 30 trials x 10 s,'

@@ -21,12 +21,10 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'pressure_controller = inflarm_control.nodes.pressure_controller:main',
-            'trial_runner = inflarm_control.nodes.trial_runner:main',
-            'tip_path_demo = inflarm_control.nodes.tip_path_demo:main',
-            'elastostatic_ik = inflarm_control.nodes.elastostatic_ik:main',
-            'inflarm-build-knowledge = inflarm_control.knowledge_cli:main',
-            'inflarm-sra-experiments = inflarm_control.sra_experiments:main',
+            'pressure_controller = inflarm_control.executables:pressure_controller',
+            'trial_runner = inflarm_control.executables:trial_runner',
+            'tip_path_demo = inflarm_control.executables:tip_path_demo',
+            'elastostatic_ik = inflarm_control.executables:elastostatic_ik',
             'inflarm-ik-figures = inflarm_control.ik_figures:main',
         ],
     },

@@ -21,8 +21,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'load_estimator = inflarm_estimation.nodes.load_estimator:main',
-            'inflarm-estimate-bag = inflarm_estimation.bag_estimate:main',
+            'load_estimator = inflarm_estimation.executables:load_estimator',
         ],
     },
 )

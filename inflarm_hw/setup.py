@@ -21,12 +21,14 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'demo_joint_publisher = inflarm_hw.nodes.demo_joint_publisher:main',
-            'joint_state_monitor = inflarm_hw.nodes.joint_state_monitor:main',
-            'sra_sim = inflarm_hw.nodes.sra_sim:main',
-            'arm_sim = inflarm_hw.nodes.arm_sim:main',
-            'bag_recorder = inflarm_hw.nodes.bag_recorder:main',
-            'bag_player = inflarm_hw.nodes.bag_player:main',
+            'demo_joint_publisher = inflarm_hw.executables:demo_joint_publisher',
+            'joint_state_monitor = inflarm_hw.executables:joint_state_monitor',
+            'sra_sim = inflarm_hw.executables:sra_sim',
+            'arm_sim = inflarm_hw.executables:arm_sim',
+            'bag_recorder = inflarm_hw.executables:bag_recorder',
+            'bag_player = inflarm_hw.executables:bag_player',
+            'hw_bridge = inflarm_hw.executables:hw_bridge',
+            'sim_mcu = inflarm_hw.executables:sim_mcu',
         ],
     },
 )

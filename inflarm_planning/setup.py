@@ -21,6 +21,8 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'path_planner = inflarm_planning.executables:path_planner',
+            'inflarm-plan-figures = inflarm_planning.plan_figures:main',
         ],
     },
 )

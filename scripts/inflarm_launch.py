@@ -8,6 +8,7 @@ Exit code 0 only when every node exited cleanly.
 """
 
 import argparse
+import collections
 import dataclasses
 from dataclasses import dataclass, field
 import os
@@ -107,6 +108,23 @@ def ros_environment(base: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
+# Node processes start with these blocked: a stop request sent before a node has installed its
+# handlers waits for them instead of killing the interpreter (inflarm_msgs_json.ros.signals).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+LAST_LINES = 15  # output lines kept per process, shown when it dies or hangs
+
+
+def start_node_process(command: list[str], env: dict[str, str], **popen_args) -> subprocess.Popen:
+    """Popen ``command`` in a session of its own with the stop signals blocked until the node
+    unblocks them; a terminal's Ctrl-C reaches only the parent, which forwards it."""
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        return subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL,
+                                start_new_session=True, **popen_args)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+
+
 class ProcessGroup:
     """Child processes started together and stopped together."""
 
@@ -114,15 +132,15 @@ class ProcessGroup:
         self.env = ros_environment(env)
         self.output = output
         self.processes: dict[str, subprocess.Popen] = {}
+        self.last_lines: dict[str, collections.deque[str]] = {}
         self._threads: list[threading.Thread] = []
         self._lock = threading.Lock()
 
     def start(self, name: str, command: list[str]) -> subprocess.Popen:
-        # A session of its own: a terminal's Ctrl-C reaches only the launcher, which forwards it.
-        process = subprocess.Popen(
-            command, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL, start_new_session=True, text=True, bufsize=1)
+        process = start_node_process(command, self.env, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1)
         self.processes[name] = process
+        self.last_lines[name] = collections.deque(maxlen=LAST_LINES)
         thread = threading.Thread(target=self._relay, args=(name, process), daemon=True)
         thread.start()
         self._threads.append(thread)
@@ -131,26 +149,45 @@ class ProcessGroup:
     def _relay(self, name: str, process: subprocess.Popen) -> None:
         for line in process.stdout:
             with self._lock:
+                self.last_lines[name].append(line.rstrip('\n'))
                 self.output.write(f'[{name}] {line}')
                 self.output.flush()
 
     def first_exited(self) -> str | None:
         return next((n for n, p in self.processes.items() if p.poll() is not None), None)
 
+    def describe(self, name: str, what: str) -> str:
+        """``what`` happened to ``name``, with its last output lines."""
+        with self._lock:
+            lines = '\n'.join(f'    {line}' for line in self.last_lines[name]) or '    (none)'
+        return f'[launch] {name} {what}; its last output:\n{lines}'
+
     def stop(self, grace_s: float = 10.0) -> dict[str, int]:
-        """SIGINT every running child, SIGKILL those still alive after ``grace_s``."""
+        """SIGINT every running child, SIGKILL those still alive after ``grace_s``.
+
+        Returns each child's exit code (negative: killed by that signal).
+        """
         for process in self.processes.values():
             if process.poll() is None:
                 process.send_signal(signal.SIGINT)
         deadline = time.monotonic() + grace_s
-        for process in self.processes.values():
+        hung = []
+        for name, process in self.processes.items():
             try:
                 process.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+                hung.append(name)
+                process.send_signal(signal.SIGUSR1)  # the node prints its threads' stacks
+                try:
+                    process.wait(timeout=1.0)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
         for thread in self._threads:
             thread.join(timeout=2.0)
+        for name in hung:
+            print(self.describe(name, f'did not stop within {grace_s:g} s of SIGINT: killed'),
+                  file=sys.stderr)
         return {name: process.returncode for name, process in self.processes.items()}
 
 
@@ -173,8 +210,8 @@ def launch(nodes: tuple[NodeProcess, ...], duration_s: float | None) -> int:
             break
         stop_requested.wait(0.1)
     if died is not None:
-        print(f'[launch] {died} exited with code {group.processes[died].returncode}; '
-              'stopping the system', file=sys.stderr)
+        print(group.describe(died, f'exited with code {group.processes[died].returncode}; '
+                                   'stopping the system'), file=sys.stderr)
     codes = group.stop()
     failed = {name: code for name, code in codes.items() if code != 0}
     if failed:

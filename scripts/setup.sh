@@ -28,7 +28,8 @@ fi
 # package metadata, entry points and installed data files do.
 packages=(inflarm_*/)
 build_hash=$(find "${packages[@]}" -type f \( -name setup.py -o -name setup.cfg \
-    -o -name package.xml -o -path '*/resource/*' -o -path '*/config/*' -o -path '*/schema/*' \) \
+    -o -name package.xml -o -path '*/resource/*' -o -path '*/config/*' -o -path '*/schema/*' \
+    -o -path '*/urdf/*' -o -path '*/launch/*' -o -path '*/rviz/*' \) \
     -print0 | sort -z | xargs -0 sha256sum | sha256sum | cut -d' ' -f1)
 mkdir -p log
 if [ "$(cat install/.build.sha256 2>/dev/null)" != "$build_hash" ]; then
@@ -39,4 +40,14 @@ if [ "$(cat install/.build.sha256 2>/dev/null)" != "$build_hash" ]; then
   tail -n 1 log/colcon-build.txt
   echo "$build_hash" > install/.build.sha256
 fi
+# The compiled kernels (numba): compiled once per source change (about a minute), later loaded
+# from the on-disk cache in a second; compiling here keeps the first node start and test fast.
+# shellcheck disable=SC1091
+( source scripts/env.sh && python -c '
+from inflarm_model.elastostatics import warm_up
+from inflarm_planning.astar import plan_path
+from inflarm_planning.scenario import GOAL, OBSTACLE, START
+warm_up()
+plan_path(START, GOAL, [OBSTACLE], resolution=0.01, alert_margin=0.03)
+' ) || { echo "setup: compiling the kernels failed" >&2; exit 1; }
 echo "setup: ready ($root)"

@@ -30,6 +30,51 @@ def wait_until(predicate: Callable[[], bool], timeout_s: float = 10.0) -> bool:
     return True
 
 
+class BaseFrameForces:
+    """Estimated tip forces in the base frame, from ``estimated_wrench`` (tip frame) and the
+    ``estimated_joint_states`` of the same stamp, as a tf2 user would turn them."""
+
+    def __init__(self, node, arm=None) -> None:
+        from geometry_msgs.msg import WrenchStamped
+        from sensor_msgs.msg import JointState
+
+        from inflarm_model.kinematics import FlexibleArm
+        from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS
+        self.arm = arm or FlexibleArm()
+        self.poses: dict[tuple[int, int], list[float]] = {}
+        self.wrenches: list = []
+        self.forces: list = []  # (stamp [s], force (3,) [N])
+        node.create_subscription(JointState, 'estimated_joint_states', self._on_pose,
+                                 JOINT_STATE_QOS)
+        node.create_subscription(WrenchStamped, 'estimated_wrench', self._on_wrench,
+                                 RELIABLE_QOS)
+
+    @staticmethod
+    def _key(stamp) -> tuple[int, int]:
+        return stamp.sec, stamp.nanosec
+
+    def _on_pose(self, msg) -> None:
+        self.poses[self._key(msg.header.stamp)] = list(msg.position)
+        self._pair()
+
+    def _on_wrench(self, msg) -> None:
+        self.wrenches.append(msg)
+        self._pair()
+
+    def _pair(self) -> None:
+        import numpy as np
+        while self.wrenches and self._key(self.wrenches[0].header.stamp) in self.poses:
+            wrench = self.wrenches.pop(0)
+            q = self.poses.pop(self._key(wrench.header.stamp))
+            f = wrench.wrench.force
+            rotation = self.arm.fk(q)[:3, :3]
+            stamp = wrench.header.stamp.sec + wrench.header.stamp.nanosec * 1e-9
+            self.forces.append((stamp, rotation @ np.array([f.x, f.y, f.z])))
+
+    def __len__(self) -> int:
+        return len(self.forces)
+
+
 class _SyncBuffer(io.StringIO):
     """A StringIO that the relay threads and the test can use at the same time."""
 

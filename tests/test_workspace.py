@@ -21,10 +21,10 @@ def console_scripts(package: str) -> list[tuple[str, str, str]]:
     return ENTRY_POINT.findall((REPO_ROOT / package / 'setup.py').read_text())
 
 
-def test_the_seven_packages_exist():
+def test_the_seven_packages_and_the_bringup_exist():
     assert PACKAGES == [
-        'inflarm_control', 'inflarm_estimation', 'inflarm_hw', 'inflarm_model',
-        'inflarm_msgs_json', 'inflarm_planning', 'inflarm_vision',
+        'inflarm_bringup', 'inflarm_control', 'inflarm_estimation', 'inflarm_hw',
+        'inflarm_model', 'inflarm_msgs_json', 'inflarm_planning', 'inflarm_vision',
     ]
 
 
@@ -42,6 +42,17 @@ def test_every_declared_executable_resolves_like_ros2_run(package):
         path = pathlib.Path(get_package_prefix(package), 'lib', package, executable)
         assert os.access(path, os.X_OK), f'{package} {executable}: no executable at {path}'
         assert callable(getattr(importlib.import_module(module), function))
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_node_executables_own_the_stop_signals_before_they_import_their_node(package):
+    # A console script pointing into nodes/ would import rclpy & co. before any handler exists.
+    for executable, module, function in console_scripts(package):
+        assert '.nodes' not in module, (
+            f'{package} {executable}: register it in {package}.executables (node_entry)')
+        if module == f'{package}.executables':
+            entry = getattr(importlib.import_module(module), function)
+            assert entry.__doc__.startswith(f'Run {package}.nodes.{executable}.main()')
 
 
 def test_the_ros2_runner_runs_an_executable_and_reports_unknown_ones():

@@ -33,17 +33,18 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from inflarm_model.elastostatics import (  # the private helpers are the shared hot path
+from inflarm_model.elastostatics import (
     MOTOR_INDICES,
     SPRING_INDICES,
-    _cholesky_solve4,
-    _load_hessian_blocks,
-    _solve_springs,
-    arm_kernel,
+    check_arm,
     check_rows,
     check_stiffness,
     check_vector,
+    equilibrium_stiffness,
     link_moments,
+    load_hessian,
+    spring_deflections,
+    tip_position_and_jacobian,
 )
 from inflarm_model.link import (
     TESTED_PRESSURES,
@@ -55,7 +56,7 @@ __all__ = [
     'DEFAULT_MAX_CONDITION',
     'DEFAULT_MIN_AXIS_DISTANCE',
     'DEFAULT_MIN_REACH',
-    'DEFAULT_TOLERANCE',
+    'DEFAULT_POSITION_TOLERANCE',
     'PressureRequirement',
     'TrackingResult',
     'effective_jacobian',
@@ -67,7 +68,7 @@ __all__ = [
     'track_trajectory',
 ]
 
-DEFAULT_TOLERANCE = 1e-10  # tip position error [m]
+DEFAULT_POSITION_TOLERANCE = 1e-10  # tip position error [m]
 DEFAULT_MAX_CONDITION = 1e6  # of the 3x3 tip Jacobian used for the step
 # Targets closer to the base than this fold the two links onto each other (radius 55 mm) and
 # approach the folded-elbow singularity [m].
@@ -185,24 +186,14 @@ def solve_rigid_ik(
 # --- the flexible arm ------------------------------------------------------------------------
 
 
-def _load_hessian(J: npt.NDArray[np.float64], f: npt.NDArray[np.float64]):
-    """H_ab = z_a . (u_b x f), a <= b, symmetric (see inflarm_model.elastostatics)."""
-    skew = np.array([[0.0, -f[2], f[1]], [f[2], 0.0, -f[0]], [-f[1], f[0], 0.0]])
-    M = (skew @ J[3:]).T @ J[:3]
-    return np.triu(M) + np.triu(M, 1).T
+_M, _S = list(MOTOR_INDICES), list(SPRING_INDICES)
 
 
 def _effective(J, f, k):
-    U = J[:3]
-    H = _load_hessian(J, f)
-    stiff = np.diag(k) - H[np.ix_(SPRING_INDICES, SPRING_INDICES)]
-    follow = np.linalg.solve(stiff, H[np.ix_(SPRING_INDICES, MOTOR_INDICES)])  # dq_k/dq_m
-    return U[:, MOTOR_INDICES] + U[:, SPRING_INDICES] @ follow
-
-
-def _paper_inverse(J):
-    U = J[:3]
-    return U[:, MOTOR_INDICES].T @ np.linalg.inv(U @ U.T)
+    """J_eff = U_m + U_k (K - H_kk)^-1 H_km from the tip Jacobian J (6, 7)."""
+    H = load_hessian(J, f)
+    follow = np.linalg.solve(equilibrium_stiffness(H, k), H[np.ix_(_S, _M)])  # dq_k/dq_m
+    return J[:3, _M] + J[:3, _S] @ follow
 
 
 def effective_jacobian(
@@ -212,7 +203,8 @@ def effective_jacobian(
 
     ``J_eff = U_m + U_k (K - H_kk)^-1 H_km``: the motors move the tip directly (U_m) and
     through the deflections they induce, dq_k/dq_m = (K - H_kk)^-1 H_km (derivative of
-    k q_k = U_k^T f at constant f, eq. 7 of 000_ce37cf035a0a87c6).
+    k q_k = U_k^T f at constant f, eq. 7 of 000_ce37cf035a0a87c6; H from
+    ``inflarm_model.elastostatics.load_hessian``).
 
     Parameters
     ----------
@@ -237,8 +229,14 @@ def effective_jacobian(
     """
     q = check_vector('q', q, 7, 'rad')
     f = check_vector('force', force, 3, 'N')
-    k = np.array(check_stiffness(stiffness))
-    return _effective(arm.jacobian(q), f, k)
+    k = check_stiffness(stiffness)
+    return _effective(tip_position_and_jacobian(arm, q)[1], f, k)
+
+
+def _paper_inverse(J):
+    """J_m^# = U_m^T (U U^T)^-1, the motor rows of the right pseudo-inverse of U (eq. 8)."""
+    U = J[:3]
+    return U[:, _M].T @ np.linalg.inv(U @ U.T)
 
 
 def motor_pseudo_inverse(arm: object, q: npt.ArrayLike) -> npt.NDArray[np.float64]:
@@ -264,85 +262,43 @@ def motor_pseudo_inverse(arm: object, q: npt.ArrayLike) -> npt.NDArray[np.float6
     ValueError
         On invalid arguments.
     """
-    return _paper_inverse(arm.jacobian(check_vector('q', q, 7, 'rad')))
+    return _paper_inverse(tip_position_and_jacobian(arm, check_vector('q', q, 7, 'rad'))[1])
 
 
-def _effective_flat(j, f0, f1, f2, k0, k1, k2, k3):
-    """J_eff = U_m + U_k (K - H_kk)^-1 H_km from the flat Jacobian, rows as 3 tuples."""
-    h_mk, (h22, h23, h25, h26, h33, h35, h36, h55, h56, h66) = _load_hessian_blocks(
-        j, f0, f1, f2)
-    a = (k0 - h22, -h23, -h25, -h26, k1 - h33, -h35, -h36, k2 - h55, -h56, k3 - h66)
-    rows = ([], [], [])
-    for i, m in enumerate(MOTOR_INDICES):
-        x0, x1, x2, x3, _ = _cholesky_solve4(*a, *h_mk[4 * i:4 * i + 4])  # dq_k / dq_m_i
-        for r in range(3):
-            o = 7 * r
-            rows[r].append(j[o + m] + j[o + 2] * x0 + j[o + 3] * x1 + j[o + 5] * x2
-                           + j[o + 6] * x3)
-    return rows
+def _hadamard_ratio(A: npt.NDArray[np.float64]) -> float:
+    """|det A| over the product of its row norms, in [0, 1]: a scale-free singularity measure
+    (at least 1/cond^2)."""
+    norms = float(np.prod(np.linalg.norm(A, axis=1)))
+    return abs(float(np.linalg.det(A))) / norms if norms > 0.0 else 0.0
 
 
-def _solve3(rows, w0, w1, w2):
-    """Solve the 3x3 system (rows) x = w by the adjugate.
-
-    Returns ``(x0, x1, x2, ratio)``, ratio = |det| / (|row 0| |row 1| |row 2|) in [0, 1]
-    (Hadamard), a scale-free singularity measure.
-    """
-    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = rows
-    bc0, bc1, bc2 = b1 * c2 - b2 * c1, b2 * c0 - b0 * c2, b0 * c1 - b1 * c0
-    ca0, ca1, ca2 = c1 * a2 - c2 * a1, c2 * a0 - c0 * a2, c0 * a1 - c1 * a0
-    ab0, ab1, ab2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-    det = a0 * bc0 + a1 * bc1 + a2 * bc2
-    norms = math.sqrt((a0 * a0 + a1 * a1 + a2 * a2) * (b0 * b0 + b1 * b1 + b2 * b2)
-                      * (c0 * c0 + c1 * c1 + c2 * c2))
-    ratio = abs(det) / norms if norms > 0.0 else 0.0
-    if det == 0.0:
-        return math.nan, math.nan, math.nan, 0.0
-    s = 1.0 / det
-    return ((bc0 * w0 + ca0 * w1 + ab0 * w2) * s, (bc1 * w0 + ca1 * w1 + ab1 * w2) * s,
-            (bc2 * w0 + ca2 * w1 + ab2 * w2) * s, ratio)
-
-
-def _paper_step(j, w0, w1, w2):
-    """J_m^# w = U_m^T (U U^T)^-1 w, eq. (9) with the motor rows of eq. (8)."""
-    ux, uy, uz = j[0:7], j[7:14], j[14:21]
-    sxx = sum(a * a for a in ux)
-    syy = sum(a * a for a in uy)
-    szz = sum(a * a for a in uz)
-    sxy = sum(a * b for a, b in zip(ux, uy, strict=True))
-    sxz = sum(a * b for a, b in zip(ux, uz, strict=True))
-    syz = sum(a * b for a, b in zip(uy, uz, strict=True))
-    y0, y1, y2, ratio = _solve3(((sxx, sxy, sxz), (sxy, syy, syz), (sxz, syz, szz)), w0, w1, w2)
-    return tuple(ux[m] * y0 + uy[m] * y1 + uz[m] * y2 for m in MOTOR_INDICES), ratio
-
-
-# Below this Hadamard ratio of the 3x3 map (|det| over the product of its row norms, scale-free,
-# at least 1/cond^2) track_trajectory treats the configuration as singular.
+# Below this Hadamard ratio of the 3x3 map track_trajectory treats the configuration as
+# singular.
 _MIN_RATIO = 1e-9
 
 
 class _Springs:
     """Warm-started spring equilibria of one arm under a constant load."""
 
-    def __init__(self, arm: object, force: npt.NDArray[np.float64], k: tuple[float, ...]):
-        self.kernel = arm_kernel(arm)
-        self.f = tuple(force.tolist())
-        self.k = k
-        self.q_k = (0.0, 0.0, 0.0, 0.0)
+    def __init__(self, arm: object, force: npt.NDArray[np.float64], k: npt.NDArray[np.float64]):
+        check_arm(arm)
+        self.arm, self.f, self.k = arm, force, k
+        self.q_k = np.zeros(4)
 
-    def solve(self, m0: float, m1: float, m2: float):
-        """Equilibrium at these motor angles: ``(q (7-tuple), flat Jacobian, tip (3-list))``.
+    def solve(self, q_m: npt.NDArray[np.float64]):
+        """Equilibrium at these motor angles: ``(q (7,), Jacobian (6, 7), tip (3,))``.
 
         Raises ValueError when it fails.
         """
-        q0, q1, q2, q3, j, iterations, residual, status = _solve_springs(
-            self.kernel, m0, m1, m2, *self.f, *self.k, *self.q_k, _SPRING_TOL,
-            _SPRING_ITERATIONS)
-        if status != 'converged':
-            raise ValueError(f'spring equilibrium at q_m = {[m0, m1, m2]} failed ({status}, '
-                             f'residual {residual:.3g} N·m after {iterations} iterations)')
-        self.q_k = (q0, q1, q2, q3)
-        return (m0, m1, q0, q1, m2, q2, q3), j, self.kernel.tip_position()
+        eq = spring_deflections(self.arm, q_m, self.f, self.k, q_k0=self.q_k, tol=_SPRING_TOL,
+                                max_iterations=_SPRING_ITERATIONS)
+        if not eq.converged:
+            raise ValueError(f'spring equilibrium at q_m = {q_m.tolist()} failed ({eq.status}, '
+                             f'residual {eq.residual:.3g} N·m after {eq.iterations} iterations)')
+        self.q_k = eq.q_k
+        q = np.empty(7)
+        q[_M], q[_S] = q_m, eq.q_k
+        return q, eq.jacobian, eq.tip_position
 
 
 def solve_ik(
@@ -352,7 +308,7 @@ def solve_ik(
     stiffness: npt.ArrayLike,
     q_m0: npt.ArrayLike,
     *,
-    tol: float = DEFAULT_TOLERANCE,
+    tol: float = DEFAULT_POSITION_TOLERANCE,
     max_iterations: int = 50,
     max_condition: float = DEFAULT_MAX_CONDITION,
     min_reach: float = DEFAULT_MIN_REACH,
@@ -411,46 +367,43 @@ def solve_ik(
         raise ValueError(f'expected tol positive and finite [m], got {tol!r}')
     _check_target(x_d, 2.0 * L, min_reach, min_axis_distance)
     springs = _Springs(arm, f, k)
-    f0, f1, f2 = f.tolist()
-    x0, x1, x2 = x_d.tolist()
 
     # Start from the rigid solution nearest q_m0, or from q_m0 itself when its deflected tip
     # is closer (a warm start along a trajectory).
     best = None
     for start in (_nearest(_rigid_candidates(x_d, L), q0), q0):
-        m0, m1, m2 = start.tolist()
-        _, j, (p0, p1, p2) = springs.solve(m0, m1, m2)
-        e0, e1, e2 = x0 - p0, x1 - p1, x2 - p2
-        norm = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        _, J, tip = springs.solve(start)
+        error = x_d - tip
+        norm = float(np.linalg.norm(error))
         if best is None or norm < best[-1]:
-            best = (m0, m1, m2, j, e0, e1, e2, norm)
-    m0, m1, m2, j, e0, e1, e2, norm = best
+            best = (start, J, error, norm)
+    q_m, J, error, norm = best
     iterations = 0
     while norm > tol and iterations < max_iterations:
         iterations += 1
-        rows = _effective_flat(j, f0, f1, f2, *k)
-        cond = float(np.linalg.cond(rows))
+        J_eff = _effective(J, f, k)
+        cond = float(np.linalg.cond(J_eff))
         if not cond <= max_condition:
-            raise ValueError(f'singular configuration at q_m = {[m0, m1, m2]}: condition '
+            raise ValueError(f'singular configuration at q_m = {q_m.tolist()}: condition '
                              f'number of J_eff {cond:.3g} > max_condition {max_condition:.3g}')
-        d0, d1, d2, _ = _solve3(rows, e0, e1, e2)
-        size = max(abs(d0), abs(d1), abs(d2))
+        d = np.linalg.solve(J_eff, error)
+        size = float(np.abs(d).max())
         if size > _MAX_STEP:
-            d0, d1, d2 = d0 * _MAX_STEP / size, d1 * _MAX_STEP / size, d2 * _MAX_STEP / size
+            d *= _MAX_STEP / size
         alpha = 1.0
         for _ in range(_MAX_HALVINGS):
-            t0, t1, t2 = m0 + alpha * d0, m1 + alpha * d1, m2 + alpha * d2
-            _, jt, (p0, p1, p2) = springs.solve(t0, t1, t2)
-            g0, g1, g2 = x0 - p0, x1 - p1, x2 - p2
-            trial = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-            if trial < (1.0 - 1e-4 * alpha) * norm:
+            trial = q_m + alpha * d
+            _, J_t, tip = springs.solve(trial)
+            error_t = x_d - tip
+            norm_t = float(np.linalg.norm(error_t))
+            if norm_t < (1.0 - 1e-4 * alpha) * norm:
                 break
             alpha *= 0.5
         else:
             break
-        m0, m1, m2, j, e0, e1, e2, norm = t0, t1, t2, jt, g0, g1, g2, trial
+        q_m, J, error, norm = trial, J_t, error_t, norm_t
     if norm <= tol:
-        return np.array((m0, m1, m2))
+        return q_m
     raise ValueError(f'elastostatic IK did not reach target {x_d.tolist()}: tip error '
                      f'{norm:.3g} m after {iterations} iterations; the target is likely '
                      'outside the workspace of the deflected arm')
@@ -596,37 +549,26 @@ def track_trajectory(
     if method not in ('paper', 'effective'):
         raise ValueError(f"expected method 'paper' or 'effective', got {method!r}")
     springs = _Springs(arm, f, k)
-    f0, f1, f2 = f.tolist()
-    effective = method == 'effective'
-    dt = np.diff(t).tolist()
-    X_list, V_list, K_rows = X.tolist(), V.tolist(), K.tolist()
-    (ka, kb, kc), (kd, ke, kf), (kg, kh, ki) = K_rows
-    m0, m1, m2 = q_m.tolist()
-    Q = []
-    tips = []
+    Q = np.empty((N, 7))
+    tips = np.empty((N, 3))
     for n in range(N):
-        q, j, tip = springs.solve(m0, m1, m2)
-        Q.append(q)
-        tips.append(tip)
+        Q[n], J, tips[n] = springs.solve(q_m)
         if n == N - 1:
             break
-        (x0, x1, x2), (v0, v1, v2) = X_list[n], V_list[n]
-        e0, e1, e2 = x0 - tip[0], x1 - tip[1], x2 - tip[2]
-        w0 = v0 + ka * e0 + kb * e1 + kc * e2
-        w1 = v1 + kd * e0 + ke * e1 + kf * e2
-        w2 = v2 + kg * e0 + kh * e1 + ki * e2
-        if effective:
-            d0, d1, d2, ratio = _solve3(_effective_flat(j, f0, f1, f2, *k), w0, w1, w2)
+        w = V[n] + K @ (X[n] - tips[n])
+        if method == 'effective':
+            A = _effective(J, f, k)
+            ratio = _hadamard_ratio(A)
+            d = np.linalg.solve(A, w) if ratio >= _MIN_RATIO else None
         else:
-            (d0, d1, d2), ratio = _paper_step(j, w0, w1, w2)
-        if not ratio >= _MIN_RATIO:
+            U = J[:3]
+            ratio = _hadamard_ratio(U @ U.T)
+            d = _paper_inverse(J) @ w if ratio >= _MIN_RATIO else None
+        if d is None:
             raise ValueError(f'singular configuration at t = {t[n]:.6g} s, q_m = '
-                             f'{[m0, m1, m2]} (Hadamard ratio {ratio:.3g})')
-        h = dt[n]
-        m0, m1, m2 = m0 + h * d0, m1 + h * d1, m2 + h * d2
-    Q = np.array(Q)
-    tips = np.array(tips)
-    return TrackingResult(t, Q[:, MOTOR_INDICES], Q, tips, np.linalg.norm(X - tips, axis=1))
+                             f'{q_m.tolist()} (Hadamard ratio {ratio:.3g})')
+        q_m = q_m + (t[n + 1] - t[n]) * d
+    return TrackingResult(t, Q[:, _M], Q, tips, np.linalg.norm(X - tips, axis=1))
 
 
 def _gain(gain: npt.ArrayLike) -> npt.NDArray[np.float64]:
@@ -716,7 +658,7 @@ def minimum_pressure_along(
     if Qt.ndim == 2 and Qt.shape[1] == 3:
         Qm = check_rows('q_trajectory', Qt, 3, 'rad')
         springs = _Springs(arm, f, k)
-        Qt = np.array([springs.solve(*q_m)[0] for q_m in Qm.tolist()])
+        Qt = np.array([springs.solve(q_m)[0] for q_m in Qm])
     Qt = check_rows('q_trajectory', Qt, 7, 'rad')
     if Qt.shape[0] == 0:
         raise ValueError('expected a non-empty q_trajectory')

@@ -111,8 +111,7 @@ def run_scenario(
     reference = flexible.q_m[0]
     for n, x in enumerate(x_d):
         rigid_q_m[n] = reference = solve_rigid_ik(rigid, x, reference)
-    rigid_tip = np.array([spring_deflections(arm, q_m, force, stiffness).tip_position
-                          for q_m in rigid_q_m])
+    rigid_tip = spring_deflections(arm, rigid_q_m, force, stiffness).tip_position
     pressure = minimum_pressure_along(arm, flexible.q, force, stiffness, LINK_RADIUS)
     return IkScenario(flexible, rigid_q_m, rigid_tip, x_d, pressure)
 

@@ -8,9 +8,10 @@ the first 10 s at the 5 Hz control rate, 50 steps x 5 chambers, one uint16 each.
 its first trial with the memory of the nearest knowledge point (`seed_memory`), so the iterative
 learning controller starts "experienced" (eqs. (1), (4) of 001_...).
 
-`build_knowledge_database` runs those trials on the simulated arm (``inflarm_hw.sra_plant``),
-thousands of points at once; `KnowledgeDatabase` stores them in one memory-mapped file;
-`nearest_knowledge_point` snaps a target to the grid without any file.
+`build_knowledge_database` runs those trials on a plant it is given (the simulated arm,
+``inflarm_hw.sra_plant``, in ``inflarm-build-knowledge``), thousands of points at once;
+`KnowledgeDatabase` stores them in one memory-mapped file; `nearest_knowledge_point` snaps a
+target to the grid without any file.
 
 Frame and units: everything here is in the mount frame ``sra_mount`` in metres (origin at the
 mount, z along PEA1 pointing away from the mount) and pascals. Convert the paper's millimetres
@@ -60,6 +61,7 @@ limit), with a round-trip error of at most 7.5 Pa.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 import math
 import os
@@ -652,16 +654,12 @@ class _BuildJob:
     grid: KnowledgeGrid
     start: tuple[float, float, float]
     n_trials: int
-    plant_params: object
+    plant_factory: Callable[[int], object]
     controller_params: PidIlcParams
 
 
 def _learn(job: _BuildJob, index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
-    # Imported here: the plant is a simulation backend, only the build needs it.
-    from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
-
-    params = SoftArmPlantParams() if job.plant_params is None else job.plant_params
-    plant = SoftArmPlant(len(index), params)
+    plant = job.plant_factory(len(index))
     controller = PidIlcController(len(index), job.controller_params)
     rate_hz = job.controller_params.rate_hz
     result = run_trials(
@@ -697,10 +695,10 @@ def build_knowledge_database(
     path: str | os.PathLike,
     grid: KnowledgeGrid = DEFAULT_GRID,
     *,
+    plant_factory: Callable[[int], object],
     n_trials: int = 30,
     batch_size: int = 4096,
     start: npt.ArrayLike = HOME_POINT,
-    plant_params: object | None = None,
     controller_params: PidIlcParams | None = None,
     scale: float = DEFAULT_SCALE_PA_PER_LSB,
     workers: int | None = None,
@@ -708,14 +706,14 @@ def build_knowledge_database(
     progress: bool = True,
 ) -> KnowledgeDatabase:
     """
-    Learn every knowledge point on the simulated arm and store it (section 3.2 of 001_...).
+    Learn every knowledge point on a plant and store it (section 3.2 of 001_...).
 
     For each point the task ``start -> point`` is repeated ``n_trials`` times with the PID +
     iterative learning controller (each trial feeding the next, eqs. (1), (3), (4)), and the
     chamber outputs of the first ``memory_steps`` steps of the last trial are stored. Points are
-    simulated ``batch_size`` arms at a time (``inflarm_hw.sra_plant.SoftArmPlant`` is vectorized
-    over arms), optionally in several processes. An existing file is resumed: only points not yet
-    filled are learned, so an interrupted build can be restarted.
+    run ``batch_size`` arms at a time (the plant is vectorized over arms), optionally in several
+    processes. An existing file is resumed: only points not yet filled are learned, so an
+    interrupted build can be restarted.
 
     Parameters
     ----------
@@ -729,8 +727,11 @@ def build_knowledge_database(
         Arms simulated together; a few thousand keeps the arrays in cache.
     start : array-like, shape (3,), optional
         Start point of every trial [m, sra_mount]; the paper's (0, 0, 0.604) m.
-    plant_params : inflarm_hw.sra_plant.SoftArmPlantParams, optional
-        Simulated plant; its defaults if None.
+    plant_factory : callable
+        ``plant_factory(n)`` makes a plant of ``n`` arms with ``reset()``, ``step(command,
+        dt)`` and ``measure()`` (see ``inflarm_control.pid_ilc.run_trials``), e.g. the simulated
+        ``inflarm_hw.sra_plant.SoftArmPlant``. The plant comes from outside: this package does
+        not depend on any hardware or simulator.
     controller_params : PidIlcParams, optional
         Controller gains; its defaults if None. Its ``memory_steps`` and ``rate_hz`` become the
         database's ``steps`` and ``rate_hz`` (10 s at 5 Hz by default).
@@ -787,7 +788,9 @@ def build_knowledge_database(
         db = KnowledgeDatabase.create(path, grid, steps, rate_hz, scale, overwrite=True)
     todo = np.flatnonzero(db._mask == 0)
     batches = [todo[i : i + batch_size] for i in range(0, len(todo), batch_size)]
-    job = _BuildJob(path, grid, start, int(n_trials), plant_params, params)
+    if not callable(plant_factory):
+        raise ValueError(f'expected plant_factory to be callable, got {plant_factory!r}')
+    job = _BuildJob(path, grid, start, int(n_trials), plant_factory, params)
 
     from tqdm import tqdm
 

@@ -46,6 +46,7 @@ import numpy.typing as npt
 from inflarm_control.trial_metrics import TrialMetrics
 from inflarm_model.soft_arm import (
     BELLOWS_PUSH,
+    CHAMBER_MAX_PRESSURE,
     CHAMBERS,
     QUADRANT_BELLOWS,
     WORKSPACE_POSITIVE,
@@ -113,7 +114,7 @@ class PidIlcParams:
     ki: tuple[float, float, float] = (0.0, 0.0, 0.0)
     kd: tuple[float, float, float] = (0.0, 0.0, 0.0)
     p_set: tuple[float, float, float] = (90e3, 90e3, 100e3)
-    p_max: tuple[float, float, float, float, float] = (100e3, 100e3, 100e3, 100e3, 100e3)
+    p_max: tuple[float, float, float, float, float] = (CHAMBER_MAX_PRESSURE,) * 5
     rate_hz: float = 5.0
     memory_steps: int = 50
     learning: bool = True

@@ -47,7 +47,7 @@ __all__ = [
 
 STORAGES = ('sqlite3', 'mcap')
 _PLUGINS = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
-_METADATA_VERSION = 8  # rosbag2 in Jazzy
+_METADATA_VERSION = 9  # what Jazzy's rosbag2 writes (type_description_hash per topic)
 _ZERO = QosTime(0, 0)  # rosbag2: the policy's default (infinite deadline, lifespan, lease)
 
 

@@ -1,7 +1,8 @@
 """Simulated inflatable-link arm: position-controlled motors, links deflecting under a tip load.
 
 The simulation backend behind the ``arm_sim`` node (pure numpy/Pinocchio, no rclpy). Motors
-follow position commands as first-order lags with a rate limit; the links sit at the
+follow position commands as first-order lags with a rate limit, their targets clamped to the
+motor limits of ``inflarm_model.urdf.JOINT_LIMITS`` (those of the URDF); the links sit at the
 elastostatic equilibrium of the tip load (``inflarm_model.elastostatics``, eqs 5-7 of
 000_ce37cf035a0a87c6), re-solved every step from the previous deflection. With ``wrinkling``
 on, a link whose bending moment would exceed M_max (Table 3) yields: its springs soften until
@@ -25,6 +26,10 @@ from inflarm_model.elastostatics import (
 )
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import TABLE3, wrinkling_moment
+from inflarm_model.urdf import JOINT_LIMITS, MOTOR_JOINT_NAMES, MOTOR_MAX_VELOCITY
+
+# Position limits of the motors [rad], DH joints 1, 2, 5: the URDF's.
+MOTOR_LOWER, MOTOR_UPPER = np.array([JOINT_LIMITS[name] for name in MOTOR_JOINT_NAMES]).T
 
 # A wrinkled link's springs soften, pass after pass, until its moment is within
 # _WRINKLE_TOLERANCE of M_max: the load's lever arm shrinks as the link yields.
@@ -41,7 +46,7 @@ class ArmSimParams:
     motor_time_constant : float
         Time constant of each motor's position response [s].
     motor_max_velocity : float
-        Rate limit of each motor [rad/s].
+        Rate limit of each motor [rad/s] (the URDF's velocity limit by default).
     position_noise : float
         Standard deviation of the motor angle readings [rad].
     effort_noise : float
@@ -51,7 +56,7 @@ class ArmSimParams:
     """
 
     motor_time_constant: float = 0.1
-    motor_max_velocity: float = 1.0
+    motor_max_velocity: float = MOTOR_MAX_VELOCITY
     position_noise: float = 0.0
     effort_noise: float = 0.0
     wrinkling: bool = False
@@ -120,7 +125,7 @@ class InflatableArmSim:
     link_radius : float
         Link radius [m].
     q_m0 : array-like, shape (3,)
-        Initial motor angles [rad]; also the initial command.
+        Initial motor angles [rad], within the motor limits; also the initial command.
     params : ArmSimParams
     rng : numpy.random.Generator, optional
         Source of the sensor noise.
@@ -137,8 +142,12 @@ class InflatableArmSim:
         self.link_radius = float(link_radius)
         self.set_link_pressure(link_pressure)
         self.q_m = _finite('q_m0', q_m0, 3)
+        if not ((self.q_m >= MOTOR_LOWER) & (self.q_m <= MOTOR_UPPER)).all():
+            raise ValueError(f'expected q_m0 within the motor limits {MOTOR_LOWER.tolist()} .. '
+                             f'{MOTOR_UPPER.tolist()} rad, got {self.q_m.tolist()}')
         self.dq_m = np.zeros(3)
         self.target = self.q_m.copy()
+        self.feed_forward = np.zeros(3)
         self.force = np.zeros(3)
         self.q_k = np.zeros(4)
         self.wrinkled = np.zeros(2, dtype=bool)
@@ -160,16 +169,19 @@ class InflatableArmSim:
         """External tip force [N], base frame; the links settle to it at the next step."""
         self.force = _finite('force', force, 3)
 
-    def command(self, q_m: npt.ArrayLike) -> None:
-        """New motor position targets [rad]."""
-        self.target = _finite('q_m', q_m, 3)
+    def command(self, q_m: npt.ArrayLike, dq_m: npt.ArrayLike | None = None) -> None:
+        """New motor position targets [rad], clamped to the motor limits (``JOINT_LIMITS``),
+        with an optional velocity feed-forward [rad/s] added to each motor's position loop
+        (default 0)."""
+        self.target = np.clip(_finite('q_m', q_m, 3), MOTOR_LOWER, MOTOR_UPPER)
+        self.feed_forward = np.zeros(3) if dq_m is None else _finite('dq_m', dq_m, 3)
 
     def step(self, dt: float) -> ArmSimState:
         """Advance ``dt`` seconds and return the new sample."""
         if not (np.isfinite(dt) and dt > 0.0):
             raise ValueError(f'expected dt > 0 s, got {dt}')
         p = self.params
-        velocity = (self.target - self.q_m) / max(p.motor_time_constant, dt)
+        velocity = self.feed_forward + (self.target - self.q_m) / max(p.motor_time_constant, dt)
         velocity = np.clip(velocity, -p.motor_max_velocity, p.motor_max_velocity)
         self.q_m = self.q_m + velocity * dt
         self.dq_m = velocity
@@ -204,6 +216,7 @@ class InflatableArmSim:
         return FlexibleArm.assemble_q(self.q_m, self.q_k)
 
     def link_moments(self) -> npt.NDArray[np.float64]:
+        """Bending moment on link 1 and link 2 [N·m] (``inflarm_model.elastostatics``)."""
         return link_moments(self.arm, self.q(), self.force)
 
     def state(self) -> ArmSimState:

@@ -12,7 +12,8 @@ arms. Pure numpy, no rclpy.
 
 Signal chain per arm and chamber (``CHAMBERS`` order: PEA, B1, B2, B3, B4)::
 
-    command [Pa] -> valve voltage (eq. 2) -> valve output [Pa] (dead zone, range)
+    command [Pa] -> valve voltage (eq. 2) -> valve output [Pa] (dead zone, range;
+      both in `inflarm_hw.valve`)
       -> chamber pressure (first order, time constant growing with chamber volume)
       -> static extension / bend (saturating, bellows stiff below a threshold pressure)
       -> play operator (hysteresis) -> mechanics (extension: 2nd order; bend: 1st order)
@@ -31,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from inflarm_hw.valve import ITV2050, ValveModel, pressure_to_voltage, voltage_to_pressure
 from inflarm_model.soft_arm import CHAMBERS, inverse_kinematics
 
 _N_CHAMBERS = len(CHAMBERS)
@@ -89,13 +91,10 @@ class SoftArmPlantParams:
     bend_play : float
         Half-width of the play operator on each bend component [rad]. 0.005 rad, about 2 mm at
         the end.
-    valve_voltage_min, valve_voltage_max : float
-        ``U_min``, ``U_max`` of eq. (2) [V]. 0-10 V analogue input assumed for the ITV2050.
-    valve_pressure_min, valve_pressure_max : float
-        ``P_min``, ``P_max`` of eq. (2) [Pa]. 0-900 kPa, the ITV2050's set-pressure range.
-    valve_dead_zone : float
-        Set pressures below this give 0 Pa [Pa]. 4 kPa, "dead zone of the proportional valves at
-        0-4 kPa" (4.3.2).
+    valve : inflarm_hw.valve.ValveModel
+        The five proportional valves (eq. (2), dead zone, range): by default the ITV2050's
+        0.005-0.9 MPa over 0-10 V and the "dead zone of the proportional valves at 0-4 kPa"
+        (4.3.2).
     max_substep : float
         Largest internal integration step [s]; a ``step(dt)`` is split into equal substeps no
         longer than this. 0.05 s (4 substeps at 5 Hz) keeps the axial oscillator
@@ -120,17 +119,15 @@ class SoftArmPlantParams:
     bend_time_constant: float = 0.15
     extension_play: float = 0.0015
     bend_play: float = 0.005
-    valve_voltage_min: float = 0.0
-    valve_voltage_max: float = 10.0
-    valve_pressure_min: float = 0.0
-    valve_pressure_max: float = 900e3
-    valve_dead_zone: float = 4e3
+    valve: ValveModel = ITV2050
     max_substep: float = 0.05
     noise_std: float = 0.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.valve, ValveModel):
+            raise ValueError(f'expected valve a ValveModel, got {type(self.valve).__name__}')
         for name, value in vars(self).items():
-            if not np.isfinite(value):
+            if name != 'valve' and not np.isfinite(value):
                 raise ValueError(f'expected finite {name}, got {value}')
         positive = (
             'pea_rest_length', 'extension_max', 'extension_pressure_scale', 'bend_max',
@@ -141,14 +138,10 @@ class SoftArmPlantParams:
             if getattr(self, name) <= 0.0:
                 raise ValueError(f'expected {name} > 0, got {getattr(self, name)}')
         non_negative = ('bellows_threshold', 'bellows_volume_gain', 'extension_play',
-                        'bend_play', 'valve_dead_zone', 'noise_std')
+                        'bend_play', 'noise_std')
         for name in non_negative:
             if getattr(self, name) < 0.0:
                 raise ValueError(f'expected {name} >= 0, got {getattr(self, name)}')
-        if self.valve_voltage_max <= self.valve_voltage_min:
-            raise ValueError('expected valve_voltage_max > valve_voltage_min')
-        if self.valve_pressure_max <= self.valve_pressure_min:
-            raise ValueError('expected valve_pressure_max > valve_pressure_min')
 
 
 class SoftArmPlant:
@@ -187,8 +180,6 @@ class SoftArmPlant:
         if not isinstance(params, SoftArmPlantParams):
             raise ValueError(f'expected params a SoftArmPlantParams, got {type(params).__name__}')
         self._params = params
-        self._valve_gain = ((params.valve_pressure_max - params.valve_pressure_min)
-                            / (params.valve_voltage_max - params.valve_voltage_min))
         c, s = np.cos(params.bend_skew), np.sin(params.bend_skew)
         # bend per bellows B1..B4 -> bend vector (bx, by): B4 - B2 along x, B3 - B1 along y
         # (each bellows bends away from its own side), then rotated by the skew
@@ -251,47 +242,17 @@ class SoftArmPlant:
             return self.end_point
         return self.end_point + self.rng.normal(0.0, self.params.noise_std, (self.n, 3))
 
-    # -- valves, eq. (2) -----------------------------------------------------------------------
+    # -- valves, eq. (2) (inflarm_hw.valve) ----------------------------------------------------
 
     def valve_voltage(self, pressure: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """Control voltage ``u_p`` that asks a valve for ``pressure``, inverse of eq. (2).
-
-        Parameters
-        ----------
-        pressure : array-like, any shape
-            Requested gauge pressure [Pa].
-
-        Returns
-        -------
-        voltage : ndarray, same shape
-            ``u_p = P (U_max - U_min) / (P_max - P_min)``, clipped to ``[U_min, U_max]`` [V].
-        """
-        pr = np.asarray(pressure, dtype=float)
-        if not np.all(np.isfinite(pr)):
-            raise ValueError(f'expected finite pressure [Pa], got {pr}')
-        p = self.params
-        return np.clip(pr / self._valve_gain, p.valve_voltage_min, p.valve_voltage_max)
+        """Control voltage that asks a valve for ``pressure`` [Pa], any shape: eq. (2) inverted,
+        clamped to the valve's input range [V] (`inflarm_hw.valve.pressure_to_voltage`)."""
+        return pressure_to_voltage(pressure, self.params.valve)
 
     def valve_pressure(self, voltage: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """Output pressure of a valve for a control voltage, eq. (2) plus the dead zone.
-
-        Parameters
-        ----------
-        voltage : array-like, any shape
-            Control voltage ``u_p`` [V].
-
-        Returns
-        -------
-        pressure : ndarray, same shape
-            ``P_out = u_p / (U_max - U_min) (P_max - P_min)`` clipped to ``[P_min, P_max]``,
-            and 0 where it is below the dead zone (4 kPa) [Pa].
-        """
-        u = np.asarray(voltage, dtype=float)
-        if not np.all(np.isfinite(u)):
-            raise ValueError(f'expected finite voltage [V], got {u}')
-        p = self.params
-        out = np.clip(u * self._valve_gain, p.valve_pressure_min, p.valve_pressure_max)
-        return np.where(out < p.valve_dead_zone, 0.0, out)
+        """Output pressure of a valve for a control voltage [V], any shape: eq. (2) plus the
+        dead zone [Pa] (`inflarm_hw.valve.voltage_to_pressure`)."""
+        return voltage_to_pressure(voltage, self.params.valve)
 
     # -- statics -------------------------------------------------------------------------------
 
@@ -396,7 +357,7 @@ class SoftArmPlant:
         ----------
         pressure_command : array-like, shape (n, 5) or (5,)
             Set pressure of each valve in `CHAMBERS` order [Pa] (a (5,) command goes to every
-            arm). Passed through eq. (2): clipped to the valve range, 0 below the dead zone.
+            arm). Turned into valve voltages by eq. (2) (`step_valve_voltages`).
         dt : float
             Duration [s], > 0; integrated in substeps of at most ``params.max_substep``.
         """
@@ -406,12 +367,30 @@ class SoftArmPlant:
                 f'expected pressure_command of shape ({self.n}, 5) or (5,), got {cmd.shape}')
         if not np.isfinite(cmd).all():
             raise ValueError('expected finite pressure_command [Pa]')
+        self.step_valve_voltages(self.valve_voltage(cmd), dt)
+
+    def step_valve_voltages(self, voltages: npt.ArrayLike, dt: float) -> None:
+        """Drive the valves at control voltages for ``dt`` seconds (what an MCU's DACs do).
+
+        Parameters
+        ----------
+        voltages : array-like, shape (n, 5) or (5,)
+            Control voltage of each valve in `CHAMBERS` order [V]. Each valve delivers eq. (2)
+            of it (clamped to its input range, 0 Pa in the dead zone), and its chamber's
+            pressure follows that output.
+        dt : float
+            Duration [s], > 0; integrated in substeps of at most ``params.max_substep``.
+        """
+        u = np.asarray(voltages, dtype=float)
+        if u.shape not in ((self.n, _N_CHAMBERS), (_N_CHAMBERS,)):
+            raise ValueError(
+                f'expected voltages of shape ({self.n}, 5) or (5,), got {u.shape}')
+        if not np.isfinite(u).all():
+            raise ValueError('expected finite voltages [V]')
         if not (dt > 0.0 and np.isfinite(dt)):
             raise ValueError(f'expected dt > 0 s, got {dt}')
         p = self.params
-        target = np.minimum(cmd, p.valve_pressure_max)
-        target = np.where(target < max(p.valve_dead_zone, p.valve_pressure_min), 0.0,
-                          np.broadcast_to(target, self._pressure.shape))
+        target = np.broadcast_to(self.valve_pressure(u), self._pressure.shape)
         n_sub = max(1, int(np.ceil(dt / p.max_substep - 1e-9)))
         h = dt / n_sub
         w = p.extension_natural_frequency

@@ -1,89 +1,114 @@
-"""Elastostatics of the inflatable-link arm: spring deflections under a tip load.
+"""Elastostatics of the inflatable-link arm: eqs (4)-(7) and the solvers of Fig. 5.
 
-The forward problem of sections 2.3-2.4 of 000_ce37cf035a0a87c6, shared by the simulated arm,
-the load and pose estimator (``inflarm_estimation.elastostatic``) and the elastostatic inverse
-kinematics (``inflarm_control.elastostatic_ik``). Pure numpy/Pinocchio, no ROS.
+The one implementation of sections 2.3-2.4 of 000_ce37cf035a0a87c6, shared by the simulated
+arm (``inflarm_hw.inflatable_arm_sim``), the load and pose estimator
+(``inflarm_estimation.elastostatic``) and the elastostatic inverse kinematics
+(``inflarm_control.elastostatic_ik``). Pure numpy/Pinocchio, no ROS.
 
 Model
 -----
-``FlexibleArm`` (Table 2): q = (theta_1 .. theta_7) in DH order, motors q_m = q[0, 1, 4] (DH
-joints 1, 2, 5), virtual springs q_k = q[2, 3, 5, 6] (DH joints 3, 4, 6, 7). A force f [N]
-acts at the tip, tip moments are zero and there is no gravity (space), as in section 2.3.
+``FlexibleArm`` (Table 2): q = (theta_1 .. theta_7) in DH order, motors q_m = q[MOTOR_INDICES]
+(DH joints 1, 2, 5), virtual springs q_k = q[SPRING_INDICES] (DH joints 3, 4, 6, 7). A force f
+[N] acts at the tip, tip moments are zero and there is no gravity (space), as in section 2.3.
 J = [J_1 .. J_7] is the geometric Jacobian of eq. (4); only its linear rows U (3x7) meet a pure
 force, so J^T gamma_e = U^T f.
 
 Sign convention (stated here once; the estimator, the IK and the simulated arm all use it)
 -------------------------------------------------------------------------------------------
-We keep the paper's eqs (5)-(7) verbatim::
+The paper's eqs (5)-(7) verbatim::
 
     tau = J^T gamma_e = U^T f              (5)  the load's generalized force on each joint
     tau_m = U_m^T f                        (6)  motor torques, DH joints 1, 2, 5
     tau_k = U_k^T f = k q_k                (7)  spring torques, DH joints 3, 4, 6, 7
 
 tau_i [N·m] is the torque the tip load exerts about joint axis i (positive about +z_{i-1}),
-i.e. the reaction torque the joint carries -- the paper's "measured" torque.
+i.e. the reaction torque the joint carries. A force pushing the tip deflects the springs along
+it. The torque a motor applies to hold the load is ``-tau_m`` (what ros2_control reports as
+``joint_states.effort``): negate at the ROS edge, never in these functions.
 
-- Springs. Spring j pulls back with the elastic torque -k_j q_j; equilibrium is
-  -k_j q_j + (U^T f)_j = 0, so ``k q_k = U_k^T f``. A force pushing the tip deflects the springs
-  along it: the tip moves by U_k q_k = U_k K^-1 U_k^T f, whose dot product with f is positive.
-- Motors. ``tau_m = U_m^T f`` is the load torque on each motor axis, the torque a joint torque
-  sensor reports. The torque the motor itself applies to hold the load is ``-tau_m``.
+Since U^T f is the gradient of f . p_e(q), the equilibria are the stationary points of the
+potential V(q_k) = 1/2 q_k^T K q_k - f . p_e(q), and the load Hessian
+``H = d(U^T f)/dq = d^2 (f . p_e)/dq^2`` has, for revolute joints a <= b,
+``H_ab = z_a . (u_b x f)``. An equilibrium is stable when K - H_kk is positive definite.
 
-Since U^T f is the gradient of f . p_e(q) (p_e the tip position), the equilibria are the
-stationary points of the potential V(q_k) = 1/2 q_k^T K q_k - f . p_e(q), and the derivative
-of the load torques is the load Hessian d(U^T f)/dq = d^2 (f . p_e) / dq^2, which for revolute
-joints a <= b is ``H_ab = z_a . (u_b x f)`` (u_b column b of U, z_a axis of joint a). An
-equilibrium is stable when K - H_kk is positive definite.
+Every function broadcasts over leading batch dimensions (q of shape (..., 7), Jacobians
+(..., 6, 7), forces (..., 3)); a single configuration is a batch of one.
 
-Solvers are Newton's method with a backtracking line search on the squared residual; they report
-convergence, iterations and the final residual instead of returning silently wrong numbers.
+Solvers
+-------
+``spring_deflections`` solves eq. (7) for q_k under a known force (the forward problem).
+``solve_load_fixed_point`` (Fig. 5 verbatim), ``solve_load_newton`` and
+``solve_load_continuation`` solve eqs (6)-(7) for f and q_k from q_m and tau_m (the inverse
+problem). All return an ``ElastostaticSolution`` and report convergence, iterations and the
+final residual instead of returning silently wrong numbers: the arrays are NaN where a sample
+did not converge.
 """
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 import math
-import weakref
 
+from numba import guvectorize, njit
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
+
+from inflarm_model.kinematics import dh_chain_kinematics
+from inflarm_model.urdf import (
+    DEFAULT_STIFFNESS,
+    MOTOR_INDICES,
+    SPRING_DEFLECTION_LIMIT,
+    SPRING_INDICES,
+)
 
 __all__ = [
     'DEFAULT_MAX_ITERATIONS',
     'DEFAULT_TOLERANCE',
+    'MAX_NEWTON_STEP',
     'MOTOR_INDICES',
+    'SPRING_DEFLECTION_LIMIT',
     'SPRING_INDICES',
-    'ArmKernel',
-    'SpringEquilibrium',
-    'SpringEquilibriumBatch',
-    'arm_kernel',
+    'STATUS_NAMES',
+    'ElastostaticSolution',
+    'check_arm',
+    'check_batch',
     'check_rows',
+    'check_solver_options',
     'check_stiffness',
     'check_vector',
-    'flat_jacobian_batch',
-    'float_list',
+    'conditioning',
+    'equilibrium_stiffness',
     'link_moments',
     'load_hessian',
+    'load_torques',
+    'motor_load',
     'motor_torques',
-    'motor_torques_batch',
+    'reduced_newton_matrix',
+    'solve_load_continuation',
+    'solve_load_fixed_point',
+    'solve_load_newton',
     'spring_deflections',
-    'spring_deflections_batch',
+    'spring_residual',
     'spring_torques',
+    'stable',
+    'tip_position_and_jacobian',
+    'warm_up',
 ]
 
-MOTOR_INDICES = (0, 1, 4)  # DH joints 1, 2, 5
-SPRING_INDICES = (2, 3, 5, 6)  # DH joints 3, 4, 6, 7
-# Equilibrium residual tolerance [N·m]: with k ~ 170 N·m/rad it pins q_k to ~1e-11 rad, yet
-# stays well above rounding (1e-14 of torques up to ~100 N·m).
-DEFAULT_TOLERANCE = 1e-9
+# Equilibrium residual tolerance max |k q_k - U_k^T f| [N·m]: with k ~ 170 N·m/rad it pins q_k
+# to ~1e-12 rad and an estimated force to ~1e-9 N, well above rounding (1e-14 of torques up to
+# ~100 N·m). The one tolerance of every solver here and of the estimator.
+DEFAULT_TOLERANCE = 1e-10
 DEFAULT_MAX_ITERATIONS = 50
-_MAX_HALVINGS = 30  # backtracking line search: step lengths down to 2**-30
+# Largest Newton correction per spring and iteration [rad]: a longer step is shortened to it.
+MAX_NEWTON_STEP = 0.25
+_MAX_HALVINGS = 20  # backtracking line search: step lengths down to 2**-20
 _ARMIJO = 1e-4
-
-_frame_jacobian = pin.computeFrameJacobian
-_LOCAL_WORLD_ALIGNED = pin.LOCAL_WORLD_ALIGNED
-_isfinite = math.isfinite
-_FLOAT64 = np.dtype(np.float64)
+# Iterates beyond twice the model range are abandoned as diverged [rad].
+_DIVERGED = 2.0 * SPRING_DEFLECTION_LIMIT
+_M = MOTOR_INDICES  # tuples: compile-time constants in the numba kernels
+_S = SPRING_INDICES
+# Compiled once, then loaded from the on-disk cache; floats divide as in numpy (inf, NaN),
+# never raising, so that a singular sample is reported instead of stopping a batch.
+_JIT = dict(cache=True, error_model='numpy')
 
 
 # --- validation ------------------------------------------------------------------------------
@@ -102,20 +127,6 @@ def check_vector(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[
     return v
 
 
-def float_list(name: str, x: npt.ArrayLike, n: int, unit: str) -> list[float]:
-    """``x`` as a list of n finite Python floats, or raise ValueError naming ``name``.
-
-    The hot-path form of the entry validation: a float ndarray of shape (n,) costs one
-    ``tolist`` and one ``sum`` (the sum of floats is finite iff every term is, barring an
-    overflow, which the slow path then sorts out).
-    """
-    if type(x) is np.ndarray and x.dtype is _FLOAT64 and x.shape == (n,):
-        v = x.tolist()
-        if _isfinite(sum(v)):
-            return v
-    return check_vector(name, x, n, unit).tolist()
-
-
 def check_rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
     """Return ``X`` as a finite float array of shape (N, n) or raise naming ``name``."""
     try:
@@ -129,20 +140,20 @@ def check_rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np
     return V
 
 
-def _rows_or_one(
-    name: str, X: npt.ArrayLike, n: int, N: int, unit: str
-) -> npt.NDArray[np.float64]:
-    """Accept shape (n,) (one value shared by all N rows) or (N, n); return (N, n)."""
-    if np.ndim(X) == 1:
-        return np.broadcast_to(check_vector(name, X, n, unit), (N, n))
-    V = check_rows(name, X, n, unit)
-    if V.shape[0] != N:
-        raise ValueError(f'expected {name} of shape ({n},) or ({N}, {n}) [{unit}], '
-                         f'got shape {V.shape}')
-    return V
+def check_batch(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
+    """Return ``x`` as a finite float array of shape (..., n) or raise naming ``name``."""
+    try:
+        v = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f'expected {name} of shape (..., {n}) [{unit}], got {x!r}') from None
+    if v.ndim == 0 or v.shape[-1] != n:
+        raise ValueError(f'expected {name} of shape (..., {n}) [{unit}], got shape {v.shape}')
+    if not np.isfinite(v).all():
+        raise ValueError(f'expected {name} to be finite [{unit}], got non-finite entries')
+    return v
 
 
-def check_stiffness(stiffness: npt.ArrayLike) -> tuple[float, float, float, float]:
+def check_stiffness(stiffness: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Validate a spring stiffness and return one value per spring.
 
     Parameters
@@ -154,7 +165,7 @@ def check_stiffness(stiffness: npt.ArrayLike) -> tuple[float, float, float, floa
 
     Returns
     -------
-    tuple of 4 float
+    ndarray, shape (4,)
         (k_3, k_4, k_6, k_7) [N·m/rad].
 
     Raises
@@ -162,8 +173,12 @@ def check_stiffness(stiffness: npt.ArrayLike) -> tuple[float, float, float, floa
     ValueError
         If ``stiffness`` is not a scalar or of shape (4,), or not positive and finite.
     """
-    if type(stiffness) is float and stiffness > 0.0 and _isfinite(stiffness):
-        return stiffness, stiffness, stiffness, stiffness  # the common case, fast
+    if isinstance(stiffness, float) and stiffness > 0.0 and math.isfinite(stiffness):
+        return np.full(4, stiffness)  # the common cases, fast
+    if (isinstance(stiffness, np.ndarray) and stiffness.shape == (4,)
+            and stiffness.dtype == np.float64 and stiffness.min() > 0.0
+            and math.isfinite(stiffness.sum())):
+        return stiffness
     try:
         k = np.asarray(stiffness, dtype=float)
     except (TypeError, ValueError):
@@ -178,639 +193,489 @@ def check_stiffness(stiffness: npt.ArrayLike) -> tuple[float, float, float, floa
         )
     if not (np.isfinite(k).all() and (k > 0.0).all()):
         raise ValueError(f'expected stiffness positive and finite [N·m/rad], got {k}')
-    k0, k1, k2, k3 = k.tolist()
-    return k0, k1, k2, k3
+    return k
 
 
-# --- the shared hot-path evaluator -----------------------------------------------------------
-
-
-class ArmKernel:
-    """Jacobian evaluations of one ``FlexibleArm`` without per-call validation.
-
-    The hot path shared by the solvers here, the estimator and the IK: one Pinocchio pass per
-    configuration, returned as a flat list of Python floats (small fixed-size algebra is faster
-    in plain floats than through numpy calls). Get instances with ``arm_kernel(arm)``.
-
-    Parameters
-    ----------
-    arm : FlexibleArm
-        The 7-DOF arm of Table 2; it must expose ``model`` (Pinocchio, DH joint order),
-        ``tip_frame_id``, ``MOTOR_INDICES == (0, 1, 4)`` and ``SPRING_INDICES == (2, 3, 5, 6)``.
-
-    Raises
-    ------
-    ValueError
-        If ``arm`` is not a 7-joint arm with that motor/spring layout.
-
-    Notes
-    -----
-    An instance owns a ``pinocchio.Data`` workspace: like the arm itself, share it between
-    threads only behind a lock.
-    """
-
-    __slots__ = ('__weakref__', '_data', '_model', '_q', '_tip', '_tip_id')
-
-    def __init__(self, arm: object) -> None:
-        motors = tuple(getattr(arm, 'MOTOR_INDICES', ()))
-        springs = tuple(getattr(arm, 'SPRING_INDICES', ()))
-        model = getattr(arm, 'model', None)
-        if motors != MOTOR_INDICES or springs != SPRING_INDICES or model is None or (
-            model.nq != 7
-        ):
-            raise ValueError(
-                'expected arm to be a FlexibleArm (7 joints, motors at DH indices (0, 1, 4), '
-                f'springs at (2, 3, 5, 6)), got {type(arm).__name__}'
-            )
-        self._model = model
-        self._data = model.createData()
-        self._tip_id = arm.tip_frame_id
-        self._q = np.zeros(7)
-        # A live reference into data.oMf: computeFrameJacobian refreshes it on every pass.
-        self._tip = self._data.oMf[self._tip_id]
-
-    def jacobian_flat(
-        self, m0: float, m1: float, k0: float, k1: float, m2: float, k2: float, k3: float
-    ) -> list[float]:
-        """Geometric Jacobian (eq. 4) at q = (m0, m1, k0, k1, m2, k2, k3), flattened.
-
-        Returns
-        -------
-        list of 42 float
-            Row-major 6x7: indices 0-6 the x row of U, 7-13 y, 14-20 z (linear [m/rad]), then
-            the x, y, z rows of the joint axes (angular), base frame.
-        """
-        q = self._q
-        q[0] = m0
-        q[1] = m1
-        q[4] = m2
-        return self.spring_jacobian_flat(k0, k1, k2, k3)
-
-    def set_motors(self, m0: float, m1: float, m2: float) -> None:
-        """Hold the motor angles [rad] for the following ``spring_jacobian_flat`` calls."""
-        q = self._q
-        q[0] = m0
-        q[1] = m1
-        q[4] = m2
-
-    def spring_jacobian_flat(self, k0: float, k1: float, k2: float, k3: float) -> list[float]:
-        """``jacobian_flat`` at the held motor angles and these spring deflections [rad]."""
-        q = self._q
-        q[2] = k0
-        q[3] = k1
-        q[5] = k2
-        q[6] = k3
-        return _frame_jacobian(
-            self._model, self._data, q, self._tip_id, _LOCAL_WORLD_ALIGNED
-        ).ravel().tolist()
-
-    def tip_position(self) -> list[float]:
-        """Tip position [m], base frame, of the configuration last passed to jacobian_flat."""
-        return self._tip.translation.tolist()
-
-
-_KERNELS: 'weakref.WeakKeyDictionary[object, ArmKernel]' = weakref.WeakKeyDictionary()
-
-
-def arm_kernel(arm: object) -> ArmKernel:
-    """The cached ``ArmKernel`` of ``arm`` (built on first use, dropped with the arm).
-
-    Raises
-    ------
-    ValueError
-        If ``arm`` is not a FlexibleArm-like 7-joint arm (see ``ArmKernel``).
-    """
+def check_solver_options(tol: float, max_iterations: int) -> tuple[float, int]:
+    """Validate a residual tolerance [N·m] and an iteration limit; return them typed."""
     try:
-        return _KERNELS[arm]
-    except KeyError:
-        kernel = _KERNELS[arm] = ArmKernel(arm)
-        return kernel
-    except TypeError:  # not weak-referenceable: build one, uncached
-        return ArmKernel(arm)
-
-
-# --- arithmetic on the flat Jacobian ---------------------------------------------------------
-# Written once for Python floats (single solves) and numpy arrays of shape (N,) (batches): the
-# flat Jacobian is then 42 arrays, one per entry.
-
-
-def _spring_terms(j: Sequence, f0, f1, f2):
-    """Spring load torques U_k^T f (eq. 7) and the spring block H_kk of the load Hessian.
-
-    Returns ``(t3, t4, t6, t7, h22, h23, h25, h26, h33, h35, h36, h55, h56, h66)`` with DH
-    (0-based) indices on the Hessian entries ``H_ab = z_a . (u_b x f)``.
-    """
-    (_, _, ux2, ux3, _, ux5, ux6,
-     _, _, uy2, uy3, _, uy5, uy6,
-     _, _, uz2, uz3, _, uz5, uz6,
-     _, _, zx2, zx3, _, zx5, zx6,
-     _, _, zy2, zy3, _, zy5, zy6,
-     _, _, zz2, zz3, _, zz5, zz6) = j
-    # v_b = u_b x f
-    v2x, v2y, v2z = uy2 * f2 - uz2 * f1, uz2 * f0 - ux2 * f2, ux2 * f1 - uy2 * f0
-    v3x, v3y, v3z = uy3 * f2 - uz3 * f1, uz3 * f0 - ux3 * f2, ux3 * f1 - uy3 * f0
-    v5x, v5y, v5z = uy5 * f2 - uz5 * f1, uz5 * f0 - ux5 * f2, ux5 * f1 - uy5 * f0
-    v6x, v6y, v6z = uy6 * f2 - uz6 * f1, uz6 * f0 - ux6 * f2, ux6 * f1 - uy6 * f0
-    return (
-        ux2 * f0 + uy2 * f1 + uz2 * f2,
-        ux3 * f0 + uy3 * f1 + uz3 * f2,
-        ux5 * f0 + uy5 * f1 + uz5 * f2,
-        ux6 * f0 + uy6 * f1 + uz6 * f2,
-        zx2 * v2x + zy2 * v2y + zz2 * v2z,
-        zx2 * v3x + zy2 * v3y + zz2 * v3z,
-        zx2 * v5x + zy2 * v5y + zz2 * v5z,
-        zx2 * v6x + zy2 * v6y + zz2 * v6z,
-        zx3 * v3x + zy3 * v3y + zz3 * v3z,
-        zx3 * v5x + zy3 * v5y + zz3 * v5z,
-        zx3 * v6x + zy3 * v6y + zz3 * v6z,
-        zx5 * v5x + zy5 * v5y + zz5 * v5z,
-        zx5 * v6x + zy5 * v6y + zz5 * v6z,
-        zx6 * v6x + zy6 * v6y + zz6 * v6z,
-    )
-
-
-def _load_hessian_blocks(j: Sequence, f0, f1, f2):
-    """Motor-spring and spring-spring blocks of the load Hessian, H_ab = z_a . (u_b x f).
-
-    Returns ``(H_mk, H_kk)``: H_mk as 12 values, rows DH 0, 1, 4 by columns DH 2, 3, 5, 6,
-    and the 10 unique values (h22, h23, h25, h26, h33, h35, h36, h55, h56, h66) of H_kk.
-    """
-    (_, _, ux2, ux3, ux4, ux5, ux6,
-     _, _, uy2, uy3, uy4, uy5, uy6,
-     _, _, uz2, uz3, uz4, uz5, uz6,
-     _, zx1, zx2, zx3, zx4, zx5, zx6,
-     _, zy1, zy2, zy3, zy4, zy5, zy6,
-     _, zz1, zz2, zz3, zz4, zz5, zz6) = j
-    v2x, v2y, v2z = uy2 * f2 - uz2 * f1, uz2 * f0 - ux2 * f2, ux2 * f1 - uy2 * f0
-    v3x, v3y, v3z = uy3 * f2 - uz3 * f1, uz3 * f0 - ux3 * f2, ux3 * f1 - uy3 * f0
-    v4x, v4y, v4z = uy4 * f2 - uz4 * f1, uz4 * f0 - ux4 * f2, ux4 * f1 - uy4 * f0
-    v5x, v5y, v5z = uy5 * f2 - uz5 * f1, uz5 * f0 - ux5 * f2, ux5 * f1 - uy5 * f0
-    v6x, v6y, v6z = uy6 * f2 - uz6 * f1, uz6 * f0 - ux6 * f2, ux6 * f1 - uy6 * f0
-    # Joint 1 turns about z_0, the base z axis (DH frame 0), so H_0b = v_b . e_z.
-    h_mk = (
-        v2z, v3z, v5z, v6z,
-        zx1 * v2x + zy1 * v2y + zz1 * v2z, zx1 * v3x + zy1 * v3y + zz1 * v3z,
-        zx1 * v5x + zy1 * v5y + zz1 * v5z, zx1 * v6x + zy1 * v6y + zz1 * v6z,
-        zx2 * v4x + zy2 * v4y + zz2 * v4z, zx3 * v4x + zy3 * v4y + zz3 * v4z,
-        zx4 * v5x + zy4 * v5y + zz4 * v5z, zx4 * v6x + zy4 * v6y + zz4 * v6z,
-    )
-    h_kk = (
-        zx2 * v2x + zy2 * v2y + zz2 * v2z, zx2 * v3x + zy2 * v3y + zz2 * v3z,
-        zx2 * v5x + zy2 * v5y + zz2 * v5z, zx2 * v6x + zy2 * v6y + zz2 * v6z,
-        zx3 * v3x + zy3 * v3y + zz3 * v3z, zx3 * v5x + zy3 * v5y + zz3 * v5z,
-        zx3 * v6x + zy3 * v6y + zz3 * v6z, zx5 * v5x + zy5 * v5y + zz5 * v5z,
-        zx5 * v6x + zy5 * v6y + zz5 * v6z, zx6 * v6x + zy6 * v6y + zz6 * v6z,
-    )
-    return h_mk, h_kk
-
-
-def _spring_torques_flat(j: Sequence, f0, f1, f2):
-    """U_k^T f: the load torques on the four springs (eq. 7)."""
-    return (
-        j[2] * f0 + j[9] * f1 + j[16] * f2,
-        j[3] * f0 + j[10] * f1 + j[17] * f2,
-        j[5] * f0 + j[12] * f1 + j[19] * f2,
-        j[6] * f0 + j[13] * f1 + j[20] * f2,
-    )
-
-
-def _cholesky_solve4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33, b0, b1, b2, b3):
-    """Solve the symmetric 4x4 system A x = b by LDL^T.
-
-    Returns ``(x0, x1, x2, x3, d_min)`` with d_min the smallest pivot of D (A is positive
-    definite iff d_min > 0). Works elementwise on arrays.
-    """
-    d0 = a00
-    l10 = a01 / d0
-    l20 = a02 / d0
-    l30 = a03 / d0
-    d1 = a11 - l10 * a01
-    l21 = (a12 - l20 * a01) / d1
-    l31 = (a13 - l30 * a01) / d1
-    d2 = a22 - l20 * a02 - l21 * l21 * d1
-    l32 = (a23 - l30 * a02 - l31 * l21 * d1) / d2
-    d3 = a33 - l30 * a03 - l31 * l31 * d1 - l32 * l32 * d2
-    y0 = b0
-    y1 = b1 - l10 * y0
-    y2 = b2 - l20 * y0 - l21 * y1
-    y3 = b3 - l30 * y0 - l31 * y1 - l32 * y2
-    x3 = y3 / d3
-    x2 = y2 / d2 - l32 * x3
-    x1 = y1 / d1 - l21 * x2 - l31 * x3
-    x0 = y0 / d0 - l10 * x1 - l20 * x2 - l30 * x3
-    if isinstance(d0, float):
-        d_min = min(d0, d1, d2, d3)
-    else:
-        d_min = np.minimum(np.minimum(d0, d1), np.minimum(d2, d3))
-    return x0, x1, x2, x3, d_min
-
-
-def _surely_stable(j: Sequence, f0, f1, f2, k_min):
-    """Cheap sufficient test that K - H_kk is positive definite (elementwise on arrays).
-
-    |H_ab| <= |f| |u_max(a,b)|, so the Frobenius norm of H_kk is at most |f| sqrt(sum), the
-    sum over the 4x4 spring block of |u|^2 of the more distal joint of each pair.
-    """
-    n2 = (f0 * f0 + f1 * f1 + f2 * f2) * (
-        (j[2] * j[2] + j[9] * j[9] + j[16] * j[16])
-        + 3.0 * (j[3] * j[3] + j[10] * j[10] + j[17] * j[17])
-        + 5.0 * (j[5] * j[5] + j[12] * j[12] + j[19] * j[19])
-        + 7.0 * (j[6] * j[6] + j[13] * j[13] + j[20] * j[20])
-    )
-    return n2 < k_min * k_min
-
-
-def _stable(j: Sequence, f0, f1, f2, k0, k1, k2, k3):
-    """K - H_kk positive definite: the equilibrium is stable (elementwise on arrays)."""
-    (_, _, _, _, h22, h23, h25, h26, h33, h35, h36, h55, h56, h66) = _spring_terms(j, f0, f1, f2)
-    zero = 0.0 * f0
-    *_, d_min = _cholesky_solve4(k0 - h22, -h23, -h25, -h26, k1 - h33, -h35, -h36, k2 - h55,
-                                 -h56, k3 - h66, zero, zero, zero, zero)
-    return d_min > 0.0
-
-
-# --- forward problem: deflections under a known load -----------------------------------------
-
-
-@dataclass(frozen=True)
-class SpringEquilibrium:
-    """Spring deflections of the loaded arm, the solution of k q_k = U_k^T f (eqs 5-7).
-
-    Attributes
-    ----------
-    q_k : ndarray, shape (4,)
-        Spring deflections [rad], DH joints 3, 4, 6, 7; NaN unless ``converged``.
-    tau_k : ndarray, shape (4,)
-        Spring torques k q_k [N·m] (eq. 7); NaN unless ``converged``.
-    tip_position : ndarray, shape (3,)
-        Deflected tip position [m], base frame; NaN unless ``converged``.
-    converged : bool
-        True when the residual reached the tolerance at a stable equilibrium.
-    iterations : int
-        Newton iterations taken.
-    residual : float
-        max |k q_k - U_k^T f| [N·m] at the last iterate.
-    status : str
-        ``'converged'``, ``'max_iterations'``, ``'line_search'`` (no descent step found) or
-        ``'unstable'`` (K - H_kk not positive definite: load beyond the stability limit).
-    """
-
-    q_k: npt.NDArray[np.float64]
-    tau_k: npt.NDArray[np.float64]
-    tip_position: npt.NDArray[np.float64]
-    converged: bool
-    iterations: int
-    residual: float
-    status: str
-
-
-def _solve_springs(kernel: ArmKernel, m0: float, m1: float, m2: float, f0: float, f1: float,
-                   f2: float, k0: float, k1: float, k2: float, k3: float, q0: float, q1: float,
-                   q2: float, q3: float, tol: float, max_iterations: int):
-    """Newton's method on g(q_k) = K q_k - U_k^T f with backtracking on |g|^2.
-
-    Returns ``(q0, q1, q2, q3, j, iterations, residual, status)`` where ``j`` is the flat
-    Jacobian at the returned configuration.
-    """
-    j = kernel.jacobian_flat(m0, m1, q0, q1, m2, q2, q3)
-    t0, t1, t2, t3 = _spring_torques_flat(j, f0, f1, f2)
-    g0, g1, g2, g3 = k0 * q0 - t0, k1 * q1 - t1, k2 * q2 - t2, k3 * q3 - t3
-    merit = g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3
-    iterations = 0
-    while True:
-        residual = max(abs(g0), abs(g1), abs(g2), abs(g3))
-        if residual <= tol:
-            # Newton's steps ensure it along the way, but a start that already balances the
-            # load (e.g. a straight arm under axial compression) must be checked.
-            if not (_surely_stable(j, f0, f1, f2, min(k0, k1, k2, k3))
-                    or _stable(j, f0, f1, f2, k0, k1, k2, k3)):
-                return q0, q1, q2, q3, j, iterations, residual, 'unstable'
-            return q0, q1, q2, q3, j, iterations, residual, 'converged'
-        if iterations >= max_iterations:
-            return q0, q1, q2, q3, j, iterations, residual, 'max_iterations'
-        iterations += 1
-        (_, _, _, _, h22, h23, h25, h26, h33, h35, h36, h55, h56, h66) = _spring_terms(
-            j, f0, f1, f2)
-        d0, d1, d2, d3, d_min = _cholesky_solve4(
-            k0 - h22, -h23, -h25, -h26, k1 - h33, -h35, -h36, k2 - h55, -h56, k3 - h66,
-            -g0, -g1, -g2, -g3)
-        if not d_min > 0.0:
-            return q0, q1, q2, q3, j, iterations, residual, 'unstable'
-        alpha = 1.0
-        for _ in range(_MAX_HALVINGS):
-            p0, p1, p2, p3 = q0 + alpha * d0, q1 + alpha * d1, q2 + alpha * d2, q3 + alpha * d3
-            jt = kernel.jacobian_flat(m0, m1, p0, p1, m2, p2, p3)
-            t0, t1, t2, t3 = _spring_torques_flat(jt, f0, f1, f2)
-            e0, e1, e2, e3 = k0 * p0 - t0, k1 * p1 - t1, k2 * p2 - t2, k3 * p3 - t3
-            trial = e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3
-            if trial <= (1.0 - 2.0 * _ARMIJO * alpha) * merit:
-                break
-            alpha *= 0.5
-        else:
-            return q0, q1, q2, q3, j, iterations, residual, 'line_search'
-        q0, q1, q2, q3, j, merit = p0, p1, p2, p3, jt, trial
-        g0, g1, g2, g3 = e0, e1, e2, e3
-
-
-def spring_deflections(
-    arm: object,
-    q_m: npt.ArrayLike,
-    force: npt.ArrayLike,
-    stiffness: npt.ArrayLike,
-    *,
-    q_k0: npt.ArrayLike | None = None,
-    tol: float = DEFAULT_TOLERANCE,
-    max_iterations: int = DEFAULT_MAX_ITERATIONS,
-) -> SpringEquilibrium:
-    """Spring deflections of the arm holding a tip force, eqs (5)-(7) of 000_ce37cf035a0a87c6.
-
-    Solves the equilibrium ``k q_k = U_k(q_m, q_k)^T f`` (nonlinear in q_k through the
-    Jacobian) by Newton's method on the residual with the analytic load Hessian and a
-    backtracking line search. Up to 100 N on the paper's arm (k = 172.71 N·m/rad) the
-    equilibrium is unique and stable (K - H_kk stays positive definite) and Newton converges
-    from q_k = 0 in 3-6 iterations.
-
-    Parameters
-    ----------
-    arm : FlexibleArm
-        The 7-DOF arm of Table 2.
-    q_m : array-like, shape (3,)
-        Motor angles [rad], DH joints 1, 2, 5.
-    force : array-like, shape (3,)
-        Tip force f [N], base frame.
-    stiffness : float or array-like, shape (4,)
-        Spring stiffness [N·m/rad], shared or per spring (see ``check_stiffness``).
-    q_k0 : array-like, shape (4,), optional
-        Initial guess [rad] (warm start); zeros by default.
-    tol : float, optional
-        Residual tolerance max |k q_k - U_k^T f| [N·m], positive.
-    max_iterations : int, optional
-        Newton iterations allowed, >= 1.
-
-    Returns
-    -------
-    SpringEquilibrium
-        Deflections, spring torques, deflected tip and diagnostics; the arrays are NaN when
-        ``converged`` is False.
-
-    Raises
-    ------
-    ValueError
-        On arguments of the wrong shape, non-finite values, non-positive stiffness or
-        tolerances.
-    """
-    kernel = arm_kernel(arm)
-    m0, m1, m2 = float_list('q_m', q_m, 3, 'rad')
-    f0, f1, f2 = float_list('force', force, 3, 'N')
-    k0, k1, k2, k3 = check_stiffness(stiffness)
-    q0, q1, q2, q3 = (0.0,) * 4 if q_k0 is None else float_list('q_k0', q_k0, 4, 'rad')
-    tol, max_iterations = _check_solver_options(tol, max_iterations)
-    q0, q1, q2, q3, _, iterations, residual, status = _solve_springs(
-        kernel, m0, m1, m2, f0, f1, f2, k0, k1, k2, k3, q0, q1, q2, q3, tol, max_iterations)
-    if status != 'converged':
-        nan = np.full(4, np.nan)
-        return SpringEquilibrium(nan, nan.copy(), np.full(3, np.nan), False, iterations,
-                                 residual, status)
-    return SpringEquilibrium(
-        np.array((q0, q1, q2, q3)),
-        np.array((k0 * q0, k1 * q1, k2 * q2, k3 * q3)),
-        np.array(kernel.tip_position()),
-        True, iterations, residual, status,
-    )
-
-
-def _check_solver_options(tol: float, max_iterations: int) -> tuple[float, int]:
-    tol = float(tol)
-    if not (_isfinite(tol) and tol > 0.0):
+        tol = float(tol)
+    except (TypeError, ValueError):
+        tol = math.nan
+    if not (math.isfinite(tol) and tol > 0.0):
         raise ValueError(f'expected tol positive and finite [N·m], got {tol!r}')
-    if int(max_iterations) != max_iterations or max_iterations < 1:
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) \
+            or max_iterations < 1:
         raise ValueError(f'expected max_iterations an integer >= 1, got {max_iterations!r}')
     return tol, int(max_iterations)
 
 
-# --- forward problem, vectorized over N ------------------------------------------------------
+def check_arm(arm: object) -> None:
+    """Raise ValueError unless ``arm`` is a FlexibleArm-like 7-joint arm.
 
-
-@dataclass(frozen=True)
-class SpringEquilibriumBatch:
-    """Spring deflections of N loaded configurations (see ``SpringEquilibrium``).
-
-    Attributes
-    ----------
-    q_k : ndarray, shape (N, 4)
-        Spring deflections [rad]; NaN rows where not converged.
-    tau_k : ndarray, shape (N, 4)
-        Spring torques k q_k [N·m]; NaN rows where not converged.
-    tip_position : ndarray, shape (N, 3)
-        Deflected tip positions [m], base frame; NaN rows where not converged.
-    converged : ndarray of bool, shape (N,)
-    iterations : ndarray of int, shape (N,)
-    residual : ndarray, shape (N,)
-        max |k q_k - U_k^T f| [N·m] at the last iterate.
-    status : ndarray of str, shape (N,)
-        As ``SpringEquilibrium.status``.
+    The functions here need ``fk_and_jacobian`` and ``fk_and_jacobian_batch`` (eq. 4) and the
+    motor/spring layout ``MOTOR_INDICES``, ``SPRING_INDICES`` of Table 2.
     """
-
-    q_k: npt.NDArray[np.float64]
-    tau_k: npt.NDArray[np.float64]
-    tip_position: npt.NDArray[np.float64]
-    converged: npt.NDArray[np.bool_]
-    iterations: npt.NDArray[np.int64]
-    residual: npt.NDArray[np.float64]
-    status: npt.NDArray[np.str_]
+    if (getattr(arm, 'MOTOR_INDICES', None) != MOTOR_INDICES
+            or getattr(arm, 'SPRING_INDICES', None) != SPRING_INDICES
+            or getattr(arm, 'n_joints', None) != 7):
+        raise ValueError(
+            f'expected arm to be a FlexibleArm (7 joints, motors at DH indices {MOTOR_INDICES},'
+            f' springs at {SPRING_INDICES}), got {type(arm).__name__}')
 
 
-def flat_jacobian_batch(arm: object, Q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Jacobians of the rows of Q (N, 7) as 42 rows of length N (the flat layout, vectorized)."""
-    J = arm.jacobian_batch(Q)
-    return np.ascontiguousarray(J.reshape(len(Q), 42).T)
+def _broadcast(*arrays: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], ...]:
+    """Broadcast arrays of shapes (..., n_i) over their leading dimensions."""
+    shapes = [a.shape[:-1] for a in arrays]
+    if all(shape == shapes[0] for shape in shapes):
+        return arrays
+    try:
+        shape = np.broadcast_shapes(*shapes)
+    except ValueError:
+        raise ValueError('expected arguments whose leading (batch) dimensions broadcast, got '
+                         f'shapes {[a.shape for a in arrays]}') from None
+    return tuple(np.broadcast_to(a, shape + a.shape[-1:]) for a in arrays)
 
 
-def spring_deflections_batch(
-    arm: object,
-    Q_m: npt.ArrayLike,
-    forces: npt.ArrayLike,
-    stiffness: npt.ArrayLike,
-    *,
-    Q_k0: npt.ArrayLike | None = None,
-    tol: float = DEFAULT_TOLERANCE,
-    max_iterations: int = DEFAULT_MAX_ITERATIONS,
-) -> SpringEquilibriumBatch:
-    """``spring_deflections`` for N configurations at once, vectorized with numpy.
+# --- eq. (4): the tip Jacobian ---------------------------------------------------------------
+
+
+def tip_position_and_jacobian(
+    arm: object, q: npt.ArrayLike
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Tip position and geometric Jacobian, eq. (4) of 000_ce37cf035a0a87c6.
+
+    Evaluated by ``inflarm_model.kinematics.dh_chain_kinematics``, the kinematics of the
+    compiled solvers below (the kinematics tests hold it equal to Pinocchio and to the textbook
+    chain).
 
     Parameters
     ----------
     arm : FlexibleArm
         The 7-DOF arm of Table 2.
-    Q_m : array-like, shape (N, 3)
-        Motor angles [rad], one configuration per row.
-    forces : array-like, shape (3,) or (N, 3)
-        Tip forces [N], base frame; one shared force or one per row.
-    stiffness : float or array-like, shape (4,)
-        Spring stiffness [N·m/rad].
-    Q_k0 : array-like, shape (N, 4), optional
-        Initial guesses [rad]; zeros by default.
-    tol, max_iterations
-        As in ``spring_deflections``.
+    q : array-like, shape (..., 7)
+        Joint angles [rad], DH order.
 
     Returns
     -------
-    SpringEquilibriumBatch
+    position : ndarray, shape (..., 3)
+        Tip position p_e [m], base frame.
+    jacobian : ndarray, shape (..., 6, 7)
+        J: rows 0-2 the linear rows U, ``u_i = z_{i-1} x (p_e - p_{i-1})`` [m/rad]; rows 3-5
+        the joint axes z_{i-1}; base-frame axes.
 
     Raises
     ------
     ValueError
-        On arguments of the wrong shape, non-finite values or non-positive stiffness.
+        If ``arm`` is not a FlexibleArm or ``q`` is not finite of shape (..., 7).
     """
-    arm_kernel(arm)  # validates the arm layout
-    Q_m = check_rows('Q_m', Q_m, 3, 'rad')
-    N = Q_m.shape[0]
-    F = _rows_or_one('forces', forces, 3, N, 'N')
-    k = np.array(check_stiffness(stiffness))
-    Q_k = np.zeros((N, 4)) if Q_k0 is None else _rows_or_one('Q_k0', Q_k0, 4, N, 'rad').copy()
-    tol, max_iterations = _check_solver_options(tol, max_iterations)
-
-    Q = np.zeros((N, 7))
-    Q[:, MOTOR_INDICES] = Q_m
-    Q[:, SPRING_INDICES] = Q_k
-    iterations = np.zeros(N, dtype=np.int64)
-    residual = np.full(N, np.inf)
-    status = np.full(N, 'max_iterations', dtype='<U14')
-    k_col = k[:, None]
-
-    def residuals(idx, Qi):
-        j = flat_jacobian_batch(arm, Qi)
-        t = np.array(_spring_torques_flat(j, *F[idx].T))
-        return j, k_col * Qi[:, SPRING_INDICES].T - t  # (4, n)
-
-    active = np.arange(N)
-    j, g = residuals(active, Q)
-    for _ in range(max_iterations + 1):
-        res = np.abs(g).max(axis=0)
-        residual[active] = res
-        done = res <= tol
-        status[active[done]] = 'converged'
-        keep = ~done & (iterations[active] < max_iterations)
-        active, j, g = active[keep], j[:, keep], g[:, keep]
-        if active.size == 0:
-            break
-        iterations[active] += 1
-        f0, f1, f2 = F[active].T
-        (_, _, _, _, h22, h23, h25, h26, h33, h35, h36, h55, h56, h66) = _spring_terms(
-            j, f0, f1, f2)
-        d0, d1, d2, d3, d_min = _cholesky_solve4(
-            k[0] - h22, -h23, -h25, -h26, k[1] - h33, -h35, -h36, k[2] - h55, -h56,
-            k[3] - h66, -g[0], -g[1], -g[2], -g[3])
-        unstable = ~(d_min > 0.0)
-        status[active[unstable]] = 'unstable'
-        d = np.array((d0, d1, d2, d3))
-        stable = ~unstable
-        active, j, g, d = active[stable], j[:, stable], g[:, stable], d[:, stable]
-        merit = (g * g).sum(axis=0)
-        alpha = np.ones(active.size)
-        pending = np.arange(active.size)
-        new_j, new_g = np.empty_like(j), np.empty_like(g)
-        for _ in range(_MAX_HALVINGS):
-            idx = active[pending]
-            Qt = Q[idx].copy()
-            Qt[:, SPRING_INDICES] += alpha[pending, None] * d[:, pending].T
-            jt, gt = residuals(idx, Qt)
-            ok = (gt * gt).sum(axis=0) <= (1.0 - 2.0 * _ARMIJO * alpha[pending]) * merit[pending]
-            accepted = pending[ok]
-            Q[active[accepted]] = Qt[ok]
-            new_j[:, accepted], new_g[:, accepted] = jt[:, ok], gt[:, ok]
-            pending = pending[~ok]
-            if pending.size == 0:
-                break
-            alpha[pending] *= 0.5
-        failed = np.zeros(active.size, dtype=bool)
-        failed[pending] = True
-        status[active[failed]] = 'line_search'
-        active, j, g = active[~failed], new_j[:, ~failed], new_g[:, ~failed]
-
-    idx = np.flatnonzero(status == 'converged')
-    if idx.size:  # stability, as in the single form
-        j = flat_jacobian_batch(arm, Q[idx])
-        f0, f1, f2 = F[idx].T
-        stable = _surely_stable(j, f0, f1, f2, k.min())
-        rest = ~stable
-        stable[rest] = _stable(j[:, rest], f0[rest], f1[rest], f2[rest], *k)
-        status[idx[~stable]] = 'unstable'
-    converged = status == 'converged'
-    Q_k = Q[:, SPRING_INDICES].copy()
-    tips = arm.fk_batch(Q)[:, :3, 3]
-    Q_k[~converged] = np.nan
-    tips[~converged] = np.nan
-    return SpringEquilibriumBatch(Q_k, Q_k * k, tips, converged, iterations, residual, status)
+    check_arm(arm)
+    q = check_batch('q', q, 7, 'rad')
+    poses, J = arm.fk_and_jacobian_batch(q.reshape(-1, 7))
+    return poses[:, :3, 3].reshape(q.shape[:-1] + (3,)), J.reshape(q.shape[:-1] + (6, 7))
 
 
-# --- load torques, moments and the load Hessian ----------------------------------------------
+# --- compiled kernels of eqs (5)-(7), one sample each ----------------------------------------
+# The one implementation of each equation. The public functions below broadcast them over
+# leading batch dimensions (numba gufuncs); the solvers call them inside compiled loops.
 
 
-def _q7(q: npt.ArrayLike) -> npt.NDArray[np.float64]:
-    return check_vector('q', q, 7, 'rad')
+@njit(**_JIT)
+def _load_torques(J, f, tau):
+    for j in range(J.shape[1]):
+        tau[j] = J[0, j] * f[0] + J[1, j] * f[1] + J[2, j] * f[2]
 
 
-def motor_torques(arm: object, q: npt.ArrayLike, force: npt.ArrayLike) -> npt.NDArray[np.float64]:
-    """Motor torques that hold a tip force, tau_m = U_m(q)^T f, eq. (6) of 000_ce37cf035a0a87c6.
+@njit(**_JIT)
+def _spring_residual(J, f, q_k, k, g):
+    for s in range(4):
+        j = _S[s]
+        g[s] = k[s] * q_k[s] - (J[0, j] * f[0] + J[1, j] * f[1] + J[2, j] * f[2])
 
-    In the convention of this module's docstring: the load torque about each motor axis (the
-    torque a joint sensor reports); the motor itself applies ``-tau_m``.
+
+@njit(**_JIT)
+def _inverse_motor_transpose(J, inverse):
+    """(U_m^T)^-1 by the adjugate: U_m^T has rows a, b, c = u_1, u_2, u_5, so its inverse has
+    columns (b x c, c x a, a x b) / det, det = a . (b x c). Returns det (0: singular)."""
+    a, b, c = _M
+    for col, (r1, r2) in enumerate(((b, c), (c, a), (a, b))):
+        inverse[0, col] = J[1, r1] * J[2, r2] - J[2, r1] * J[1, r2]
+        inverse[1, col] = J[2, r1] * J[0, r2] - J[0, r1] * J[2, r2]
+        inverse[2, col] = J[0, r1] * J[1, r2] - J[1, r1] * J[0, r2]
+    det = J[0, a] * inverse[0, 0] + J[1, a] * inverse[1, 0] + J[2, a] * inverse[2, 0]
+    for i in range(3):
+        for col in range(3):
+            inverse[i, col] /= det
+    return det
+
+
+@njit(**_JIT)
+def _motor_load(J, tau, f):
+    inverse = np.empty((3, 3))
+    det = _inverse_motor_transpose(J, inverse)
+    for i in range(3):
+        f[i] = inverse[i, 0] * tau[0] + inverse[i, 1] * tau[1] + inverse[i, 2] * tau[2]
+    return det
+
+
+@njit(**_JIT)
+def _load_hessian(J, f, H):
+    n = J.shape[1]
+    for b in range(n):
+        vx = J[1, b] * f[2] - J[2, b] * f[1]  # u_b x f
+        vy = J[2, b] * f[0] - J[0, b] * f[2]
+        vz = J[0, b] * f[1] - J[1, b] * f[0]
+        for a in range(b + 1):
+            H[a, b] = H[b, a] = J[3, a] * vx + J[4, a] * vy + J[5, a] * vz
+
+
+@njit(**_JIT)
+def _equilibrium_stiffness(H, k, A):
+    for r in range(4):
+        for c in range(4):
+            A[r, c] = -H[_S[r], _S[c]]
+        A[r, r] += k[r]
+
+
+@njit(**_JIT)
+def _reduced_newton_matrix(J, H, k, D):
+    inverse = np.empty((3, 3))
+    _inverse_motor_transpose(J, inverse)
+    _equilibrium_stiffness(H, k, D)
+    for c in range(4):
+        x0 = x1 = x2 = 0.0  # column c of X = U_m^-T H_mk
+        for i in range(3):
+            h = H[_M[i], _S[c]]
+            x0 += inverse[0, i] * h
+            x1 += inverse[1, i] * h
+            x2 += inverse[2, i] * h
+        for r in range(4):
+            j = _S[r]
+            D[r, c] += J[0, j] * x0 + J[1, j] * x1 + J[2, j] * x2
+
+
+@njit(**_JIT)
+def _positive_definite(A):
+    """Cholesky of the symmetric 4x4 A succeeds."""
+    L = np.zeros((4, 4))
+    for j in range(4):
+        s = A[j, j]
+        for p in range(j):
+            s -= L[j, p] * L[j, p]
+        if not s > 0.0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, 4):
+            t = A[i, j]
+            for p in range(j):
+                t -= L[i, p] * L[j, p]
+            L[i, j] = t / L[j, j]
+    return True
+
+
+@njit(**_JIT)
+def _solve4(A, b, x):
+    """x = A^-1 b by Gaussian elimination with partial pivoting; False if A is singular."""
+    M = A.copy()
+    y = b.copy()
+    for c in range(4):
+        p = c
+        for r in range(c + 1, 4):
+            if abs(M[r, c]) > abs(M[p, c]):
+                p = r
+        if not abs(M[p, c]) > 0.0:  # singular, or NaN
+            return False
+        if p != c:
+            for j in range(4):
+                M[c, j], M[p, j] = M[p, j], M[c, j]
+            y[c], y[p] = y[p], y[c]
+        for r in range(c + 1, 4):
+            m = M[r, c] / M[c, c]
+            for j in range(c, 4):
+                M[r, j] -= m * M[c, j]
+            y[r] -= m * y[c]
+    for r in range(3, -1, -1):
+        t = y[r]
+        for j in range(r + 1, 4):
+            t -= M[r, j] * x[j]
+        x[r] = t / M[r, r]
+    return True
+
+
+# --- public broadcasting forms ---------------------------------------------------------------
+
+_GU = dict(nopython=True, cache=True)
+
+
+@guvectorize(['void(f8[:, :], f8[:], f8[:])'], '(r,n),(c)->(n)', **_GU)
+def _load_torques_gu(J, f, tau):
+    _load_torques(J, f, tau)
+
+
+@guvectorize(['void(f8[:, :], f8[:], f8[:], f8[:], f8[:])'], '(r,n),(c),(s),(s)->(s)', **_GU)
+def _spring_residual_gu(J, f, q_k, k, g):
+    _spring_residual(J, f, q_k, k, g)
+
+
+@guvectorize(['void(f8[:, :], f8[:], f8[:])'], '(r,n),(c)->(c)', **_GU)
+def _motor_load_gu(J, tau, f):
+    _motor_load(J, tau, f)
+
+
+@guvectorize(['void(f8[:, :], f8[:], f8[:, :])'], '(r,n),(c)->(n,n)', **_GU)
+def _load_hessian_gu(J, f, H):
+    _load_hessian(J, f, H)
+
+
+@guvectorize(['void(f8[:, :], f8[:], f8[:, :])'], '(n,n),(s)->(s,s)', **_GU)
+def _equilibrium_stiffness_gu(H, k, A):
+    _equilibrium_stiffness(H, k, A)
+
+
+@guvectorize(['void(f8[:, :], f8[:, :], f8[:], f8[:, :])'], '(r,n),(n,n),(s)->(s,s)', **_GU)
+def _reduced_newton_matrix_gu(J, H, k, D):
+    _reduced_newton_matrix(J, H, k, D)
+
+
+@guvectorize(['void(f8[:, :], f8[:], b1[:])'], '(n,n),(s)->()', **_GU)
+def _stable_gu(H, k, out):
+    A = np.empty((4, 4))
+    _equilibrium_stiffness(H, k, A)
+    out[0] = _positive_definite(A)
+
+
+@guvectorize(['void(f8[:, :], f8[:], f8[:], f8[:], f8[:], f8[:])'], '(r,n),(c),(s)->(),(),(s)',
+             **_GU)
+def _conditioning_gu(J, f, k, condition, sigma, direction):
+    U_m = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            U_m[i, j] = J[i, _M[j]]
+    condition[0], sigma[0] = np.inf, np.nan
+    direction[:] = 0.0
+    if not np.isfinite(U_m).all():  # LAPACK refuses NaN
+        return
+    singular = np.linalg.svd(U_m)[1]
+    if singular[2] > 0.0:
+        condition[0] = singular[0] / singular[2]
+    H, D = np.empty((7, 7)), np.empty((4, 4))
+    _load_hessian(J, f, H)
+    _reduced_newton_matrix(J, H, k, D)
+    if np.isfinite(D).all():
+        _, values, vt = np.linalg.svd(D)
+        sigma[0] = values[3]
+        direction[:] = vt[3]
+
+
+def _f8(x: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    return np.asarray(x, dtype=np.float64)
+
+
+def load_torques(jacobian: npt.ArrayLike, force: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Generalized force of the tip load on every joint, tau = U^T f, eq. (5) of 000_....
 
     Parameters
     ----------
-    arm : FlexibleArm
-        The 7-DOF arm of Table 2.
-    q : array-like, shape (7,)
-        Joint angles [rad], DH order, spring deflections included (at equilibrium for a
-        physically consistent state).
-    force : array-like, shape (3,)
+    jacobian : array-like, shape (..., 6, 7)
+        Tip Jacobian (``tip_position_and_jacobian``); only the linear rows U are used.
+    force : array-like, shape (..., 3)
         Tip force f [N], base frame.
 
     Returns
     -------
-    ndarray, shape (3,)
-        tau_m [N·m] on DH joints 1, 2, 5.
-
-    Raises
-    ------
-    ValueError
-        If ``q`` or ``force`` has the wrong shape or is not finite.
+    ndarray, shape (..., 7)
+        tau [N·m], DH order: tau[..., MOTOR_INDICES] is tau_m (eq. 6), tau[..., SPRING_INDICES]
+        the spring load torques U_k^T f (eq. 7).
     """
-    q = _q7(q)
-    f = check_vector('force', force, 3, 'N')
-    U = arm.jacobian(q)[:3]
-    return U[:, MOTOR_INDICES].T @ f
+    return _load_torques_gu(_f8(jacobian), _f8(force))
 
 
-def motor_torques_batch(
-    arm: object, Q: npt.ArrayLike, forces: npt.ArrayLike
+def spring_residual(
+    jacobian: npt.ArrayLike, force: npt.ArrayLike, q_k: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
 ) -> npt.NDArray[np.float64]:
-    """``motor_torques`` for N configurations, vectorized.
+    """Spring equilibrium residual k q_k - U_k^T f, eq. (7) of 000_ce37cf035a0a87c6.
+
+    Parameters
+    ----------
+    jacobian : array-like, shape (..., 6, 7)
+        Tip Jacobian at q = (q_m, q_k).
+    force : array-like, shape (..., 3)
+        Tip force f [N], base frame.
+    q_k : array-like, shape (..., 4)
+        Spring deflections [rad], DH joints 3, 4, 6, 7.
+    stiffness : array-like, shape (4,)
+        k [N·m/rad] (``check_stiffness``).
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        [N·m]; zero at an equilibrium.
+    """
+    return _spring_residual_gu(_f8(jacobian), _f8(force), _f8(q_k), _f8(stiffness))
+
+
+def motor_load(jacobian: npt.ArrayLike, tau_m: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """The force that eq. (6) gives for motor torques: f solving U_m^T f = tau_m.
+
+    The rigid step of Fig. 5 of 000_ce37cf035a0a87c6, solved by the adjugate: it never
+    raises, and where U_m is singular the result is not finite.
+
+    Parameters
+    ----------
+    jacobian : array-like, shape (..., 6, 7)
+        Tip Jacobian at q = (q_m, q_k).
+    tau_m : array-like, shape (..., 3)
+        Motor torques [N·m], DH joints 1, 2, 5 (eq. 6 convention).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        f [N], base frame.
+    """
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _motor_load_gu(_f8(jacobian), _f8(tau_m))
+
+
+def load_hessian(jacobian: npt.ArrayLike, force: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Load Hessian H = d(U^T f)/dq at constant f, H_ab = z_a . (u_b x f) for a <= b.
+
+    ``H = d^2 (f . p_e)/dq^2`` is the geometric stiffness of the load (the derivative of eq. 5
+    of 000_ce37cf035a0a87c6 in q): the equilibrium of eq. (7) is stable where K - H_kk is
+    positive definite (``equilibrium_stiffness``, ``stable``).
+
+    Parameters
+    ----------
+    jacobian : array-like, shape (..., 6, 7)
+        Tip Jacobian: linear rows U (columns u_b) and joint axes z_a.
+    force : array-like, shape (..., 3)
+        Tip force f [N], base frame.
+
+    Returns
+    -------
+    ndarray, shape (..., 7, 7)
+        Symmetric H [N·m/rad], DH order.
+    """
+    return _load_hessian_gu(_f8(jacobian), _f8(force))
+
+
+def equilibrium_stiffness(
+    hessian: npt.ArrayLike, stiffness: npt.ArrayLike
+) -> npt.NDArray[np.float64]:
+    """K - H_kk: the derivative of the residual of eq. (7) in q_k at constant f.
+
+    Parameters
+    ----------
+    hessian : array-like, shape (..., 7, 7)
+        Load Hessian (``load_hessian``).
+    stiffness : array-like, shape (4,)
+        k [N·m/rad].
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+        [N·m/rad]; the equilibrium is stable where it is positive definite.
+    """
+    return _equilibrium_stiffness_gu(_f8(hessian), _f8(stiffness))
+
+
+def stable(hessian: npt.ArrayLike, stiffness: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """Whether K - H_kk is positive definite (a stable equilibrium), shape (...)."""
+    return _stable_gu(_f8(hessian), _f8(stiffness))
+
+
+def reduced_newton_matrix(
+    jacobian: npt.ArrayLike, hessian: npt.ArrayLike, stiffness: npt.ArrayLike
+) -> npt.NDArray[np.float64]:
+    """D = K - H_kk + U_k^T U_m^-T H_mk, the derivative of the reduced residual of Fig. 5.
+
+    With f(q_k) = U_m^-T tau_m eliminated by eq. (6), the reduced residual of eq. (7) is
+    g(q_k) = K q_k - U_k^T f(q_k), and dg/dq_k = D (000_ce37cf035a0a87c6, section 2.3).
+    sign(det U_m det D) is the sign of det(d tau_m / d f) at a stable equilibrium: D is singular
+    on the folds of the map f -> tau_m, where two estimates meet.
+
+    Parameters
+    ----------
+    jacobian : array-like, shape (..., 6, 7)
+        Tip Jacobian at the configuration.
+    hessian : array-like, shape (..., 7, 7)
+        Load Hessian at that configuration and the force f(q_k).
+    stiffness : array-like, shape (4,)
+        k [N·m/rad].
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
+        D [N·m/rad].
+    """
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _reduced_newton_matrix_gu(_f8(jacobian), _f8(hessian), _f8(stiffness))
+
+
+def conditioning(
+    jacobian: npt.ArrayLike, force: npt.ArrayLike, stiffness: npt.ArrayLike
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """How well motor torques determine a solution of eqs (6)-(7), and where it folds.
+
+    Parameters
+    ----------
+    jacobian : array-like, shape (..., 6, 7)
+        Tip Jacobian at the solution (finite).
+    force : array-like, shape (..., 3)
+        The solution's tip force f [N].
+    stiffness : array-like, shape (4,)
+        k [N·m/rad].
+
+    Returns
+    -------
+    condition : ndarray, shape (...)
+        2-norm condition number of U_m (inf where singular or not finite): the amplification
+        of relative torque errors into the force of eq. (6).
+    sigma : ndarray, shape (...)
+        Smallest singular value of D (``reduced_newton_matrix``) [N·m/rad]: zero on a fold of
+        f -> tau_m, where two solutions meet; NaN where D is not finite.
+    direction : ndarray, shape (..., 4)
+        Its right singular vector (unit, q_k space; zero where D is not finite): along it the
+        solutions of a fold meet.
+    """
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _conditioning_gu(_f8(jacobian), _f8(force), _f8(stiffness))
+
+
+# --- arm-level forms -------------------------------------------------------------------------
+
+
+def _q_and_force(arm: object, q: npt.ArrayLike, force: npt.ArrayLike):
+    check_arm(arm)
+    return _broadcast(check_batch('q', q, 7, 'rad'), check_batch('force', force, 3, 'N'))
+
+
+def motor_torques(arm: object, q: npt.ArrayLike, force: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Motor torques that hold a tip force, tau_m = U_m(q)^T f, eq. (6) of 000_....
 
     Parameters
     ----------
     arm : FlexibleArm
         The 7-DOF arm of Table 2.
-    Q : array-like, shape (N, 7)
-        Joint angles [rad], one configuration per row.
-    forces : array-like, shape (3,) or (N, 3)
-        Tip forces [N], base frame.
+    q : array-like, shape (..., 7)
+        Joint angles [rad], DH order, spring deflections included (at equilibrium for a
+        physically consistent state).
+    force : array-like, shape (..., 3)
+        Tip force f [N], base frame (broadcast against ``q``).
 
     Returns
     -------
-    ndarray, shape (N, 3)
-        tau_m [N·m] on DH joints 1, 2, 5.
+    ndarray, shape (..., 3)
+        tau_m [N·m] on DH joints 1, 2, 5: the load torque about each motor axis (the motor
+        applies ``-tau_m``).
 
     Raises
     ------
     ValueError
-        On arguments of the wrong shape or non-finite values.
+        If an argument has the wrong shape or is not finite.
     """
-    Q = check_rows('Q', Q, 7, 'rad')
-    F = _rows_or_one('forces', forces, 3, Q.shape[0], 'N')
-    U = arm.jacobian_batch(Q)[:, :3, :]
-    return np.einsum('nij,ni->nj', U[:, :, MOTOR_INDICES], F)
+    q, f = _q_and_force(arm, q, force)
+    return load_torques(tip_position_and_jacobian(arm, q)[1], f)[..., _M]
 
 
 def spring_torques(
@@ -824,29 +689,23 @@ def spring_torques(
     ----------
     arm : FlexibleArm
         The 7-DOF arm of Table 2.
-    q : array-like, shape (7,) or (N, 7)
+    q : array-like, shape (..., 7)
         Joint angles [rad], DH order.
-    force : array-like, shape (3,) or (N, 3)
-        Tip force(s) f [N], base frame.
+    force : array-like, shape (..., 3)
+        Tip force f [N], base frame.
 
     Returns
     -------
-    ndarray, shape (4,) or (N, 4)
-        Spring torques [N·m].
+    ndarray, shape (..., 4)
+        Spring load torques [N·m].
 
     Raises
     ------
     ValueError
-        On arguments of the wrong shape or non-finite values.
+        If an argument has the wrong shape or is not finite.
     """
-    q_arr = np.asarray(q, dtype=float)
-    if q_arr.ndim == 1:
-        U = arm.jacobian(_q7(q_arr))[:3]
-        return U[:, SPRING_INDICES].T @ check_vector('force', force, 3, 'N')
-    Q = check_rows('q', q_arr, 7, 'rad')
-    F = _rows_or_one('force', force, 3, Q.shape[0], 'N')
-    U = arm.jacobian_batch(Q)[:, :3, :]
-    return np.einsum('nij,ni->nj', U[:, :, SPRING_INDICES], F)
+    q, f = _q_and_force(arm, q, force)
+    return load_torques(tip_position_and_jacobian(arm, q)[1], f)[..., _S]
 
 
 def link_moments(
@@ -864,59 +723,488 @@ def link_moments(
     ----------
     arm : FlexibleArm
         The 7-DOF arm of Table 2.
-    q : array-like, shape (7,) or (N, 7)
+    q : array-like, shape (..., 7)
         Joint angles [rad], DH order, spring deflections included.
-    force : array-like, shape (3,) or (N, 3)
-        Tip force(s) f [N], base frame.
+    force : array-like, shape (..., 3)
+        Tip force f [N], base frame.
 
     Returns
     -------
-    ndarray, shape (2,) or (N, 2)
+    ndarray, shape (..., 2)
         Moments [N·m] on link 1 (springs DH 3, 4) and link 2 (springs DH 6, 7).
 
     Raises
     ------
     ValueError
-        On arguments of the wrong shape or non-finite values.
+        If an argument has the wrong shape or is not finite.
     """
     t = spring_torques(arm, q, force)
     return np.stack([np.hypot(t[..., 0], t[..., 1]), np.hypot(t[..., 2], t[..., 3])], axis=-1)
 
 
-def load_hessian(
-    arm: object, q: npt.ArrayLike, force: npt.ArrayLike
-) -> npt.NDArray[np.float64]:
-    """Derivative of the load torques U(q)^T f with respect to q (f held constant).
+# --- the solvers -----------------------------------------------------------------------------
 
-    ``H = d(U^T f)/dq = d^2 (f . p_e)/dq^2``; for revolute joints a <= b,
-    ``H_ab = z_a . (u_b x f)`` with z_a the axis of joint a and u_b the linear Jacobian column
-    of joint b (eq. 4). It is the geometric stiffness of the load: the equilibrium of eq. (7)
-    is stable when K - H_kk is positive definite.
+STATUS_NAMES = ('converged', 'max_iterations', 'line_search', 'diverged', 'unstable',
+                'out_of_range')
+_STATUS_ARRAY = np.array(STATUS_NAMES)
+_CONVERGED, _MAX_ITERATIONS, _LINE_SEARCH, _DIVERGED, _UNSTABLE, _OUT_OF_RANGE = range(6)
+_NEWTON, _FIXED_POINT, _CONTINUATION = range(3)
+
+
+@dataclass(frozen=True)
+class ElastostaticSolution:
+    """A spring equilibrium of eq. (7): the deflections and the load that they hold.
+
+    The result of every solver here, forward (``spring_deflections``: the force is given) and
+    inverse (``solve_load_*``: the force is solved from the motor torques). ``batch`` below is
+    the broadcast leading shape of the inputs; for a single configuration it is () and the
+    per-sample fields are Python scalars.
+
+    Attributes
+    ----------
+    force : ndarray, shape batch + (3,)
+        Tip force f [N], base frame; NaN where not converged.
+    q_k : ndarray, shape batch + (4,)
+        Spring deflections [rad], DH joints 3, 4, 6, 7; NaN where not converged.
+    tau_k : ndarray, shape batch + (4,)
+        Spring torques k q_k [N·m] (eq. 7); NaN where not converged.
+    tip_position : ndarray, shape batch + (3,)
+        Deflected tip position [m], base frame; NaN where not converged.
+    jacobian : ndarray, shape batch + (6, 7)
+        Tip Jacobian (eq. 4) at the equilibrium; NaN where not converged.
+    iterations : int or ndarray of int, shape batch
+        Newton (or fixed-point) steps taken.
+    residual : float or ndarray, shape batch
+        max |k q_k - U_k^T f| [N·m] at the last iterate.
+    status : str or ndarray of str, shape batch
+        One of ``STATUS_NAMES``: ``'converged'``; ``'max_iterations'``; ``'line_search'`` (no
+        step reduced the residual, or a singular Newton matrix); ``'diverged'`` (iterates
+        beyond twice the model range, or not finite, e.g. where U_m is singular);
+        ``'unstable'`` (K - H_kk not positive definite); ``'out_of_range'`` (an equilibrium
+        with some |q_k| > SPRING_DEFLECTION_LIMIT, outside the model).
+    """
+
+    force: npt.NDArray[np.float64]
+    q_k: npt.NDArray[np.float64]
+    tau_k: npt.NDArray[np.float64]
+    tip_position: npt.NDArray[np.float64]
+    jacobian: npt.NDArray[np.float64]
+    iterations: int | npt.NDArray[np.int64]
+    residual: float | npt.NDArray[np.float64]
+    status: str | npt.NDArray[np.str_]
+
+    @property
+    def converged(self) -> bool | npt.NDArray[np.bool_]:
+        """Where ``status`` is ``'converged'``."""
+        return self.status == 'converged'
+
+
+@njit(**_JIT)
+def _evaluate(dh_table, q_m, q_k, load, inverse, k, q, pose, J, origins, f, g):
+    """Kinematics, force and residual of eq. (7) at q_k; returns |g|^2 (NaN if not finite).
+
+    ``load`` is f itself (forward problem) or tau_m, and then f = U_m^-T tau_m (inverse).
+    """
+    for i in range(3):
+        q[_M[i]] = q_m[i]
+    for i in range(4):
+        q[_S[i]] = q_k[i]
+    dh_chain_kinematics(dh_table, q, pose, J, origins)
+    if inverse:
+        _motor_load(J, load, f)
+    else:
+        f[:] = load
+    _spring_residual(J, f, q_k, k, g)
+    merit = 0.0
+    for i in range(4):
+        merit += g[i] * g[i]
+    return merit if math.isfinite(merit) else math.nan
+
+
+@njit(**_JIT)
+def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, tol, max_iterations,
+                  q_k_out, f_out, tip_out, J_out):
+    """Newton's method (or the fixed point of Fig. 5) on the residual of eq. (7), one sample.
+
+    Newton uses K - H_kk (forward) or D (inverse, ``reduced_newton_matrix``), a correction
+    shortened to MAX_NEWTON_STEP and a backtracking (Armijo) line search on |g|^2. Returns
+    (status code, iterations, residual); the outputs hold the last iterate.
+    """
+    q, origins = np.empty(7), np.empty((8, 3))
+    pose, J, f, g = np.empty((4, 4)), np.empty((6, 7)), np.empty(3), np.empty(4)
+    pose_t, J_t, f_t, g_t = np.empty((4, 4)), np.empty((6, 7)), np.empty(3), np.empty(4)
+    H, A, d = np.empty((7, 7)), np.empty((4, 4)), np.empty(4)
+    x = q_k0.copy()
+    merit = _evaluate(dh_table, q_m, x, load, inverse, k, q, pose, J, origins, f, g)
+    iterations = 0
+    status = _MAX_ITERATIONS
+    residual = math.inf
+    while True:
+        residual = max(abs(g[0]), abs(g[1]), abs(g[2]), abs(g[3]))
+        if not math.isfinite(merit):
+            status = _DIVERGED
+            break
+        if residual <= tol:
+            status = _CONVERGED
+            break
+        if iterations >= max_iterations:
+            break
+        iterations += 1
+        if fixed_point:  # Fig. 5: q_k <- U_k^T f / k
+            for i in range(4):
+                x[i] -= g[i] / k[i]
+            merit = _evaluate(dh_table, q_m, x, load, inverse, k, q, pose, J, origins, f, g)
+        else:
+            _load_hessian(J, f, H)
+            if inverse:
+                _reduced_newton_matrix(J, H, k, A)
+            else:
+                _equilibrium_stiffness(H, k, A)
+            if not _solve4(A, -g, d):
+                status = _LINE_SEARCH
+                break
+            size = max(abs(d[0]), abs(d[1]), abs(d[2]), abs(d[3]))
+            if not math.isfinite(size):
+                status = _LINE_SEARCH
+                break
+            if size > MAX_NEWTON_STEP:
+                d *= MAX_NEWTON_STEP / size
+            alpha = 1.0
+            accepted = False
+            for _ in range(_MAX_HALVINGS):
+                trial = x + alpha * d
+                merit_t = _evaluate(dh_table, q_m, trial, load, inverse, k, q, pose_t, J_t,
+                                    origins, f_t, g_t)
+                if merit_t <= (1.0 - 2.0 * _ARMIJO * alpha) * merit:
+                    accepted = True
+                    break
+                alpha *= 0.5
+            if not accepted:
+                status = _LINE_SEARCH
+                break
+            x, merit = trial, merit_t
+            pose, pose_t, J, J_t, f, f_t, g, g_t = pose_t, pose, J_t, J, f_t, f, g_t, g
+        if max(abs(x[0]), abs(x[1]), abs(x[2]), abs(x[3])) > _DIVERGED:
+            status = _DIVERGED
+            break
+    if status == _CONVERGED:
+        if max(abs(x[0]), abs(x[1]), abs(x[2]), abs(x[3])) > SPRING_DEFLECTION_LIMIT:
+            status = _OUT_OF_RANGE
+        else:
+            _load_hessian(J, f, H)
+            _equilibrium_stiffness(H, k, A)
+            if not _positive_definite(A):
+                status = _UNSTABLE
+    q_k_out[:] = x
+    f_out[:] = f
+    tip_out[:] = pose[:3, 3]
+    J_out[:, :] = J
+    return status, iterations, residual
+
+
+@njit(**_JIT)
+def _continue_sample(dh_table, q_m, tau_m, k, steps, tol, max_iterations, q_k_out, f_out,
+                     tip_out, J_out):
+    """Continuation in the torques: lambda tau_m from 0 to 1, each solved from the last."""
+    x = np.zeros(4)
+    lam, step = 0.0, 1.0 / steps
+    total = 0
+    while True:
+        target = min(1.0, lam + step)
+        status, iterations, residual = _solve_sample(
+            dh_table, q_m, target * tau_m, True, False, k, x, tol, max_iterations, q_k_out,
+            f_out, tip_out, J_out)
+        total += iterations
+        if status == _CONVERGED:
+            lam = target
+            x[:] = q_k_out
+        else:
+            step *= 0.5
+        if lam >= 1.0 or step < 1.0 / (8 * steps):
+            return status, total, residual
+
+
+@njit(**_JIT)
+def _solve_rows(dh_table, Q_m, loads, inverse, mode, k, Q_k0, tol, max_iterations, steps,
+                Q_k, F, tips, Js, status, iterations, residual):
+    for i in range(Q_m.shape[0]):
+        if mode == _CONTINUATION:
+            status[i], iterations[i], residual[i] = _continue_sample(
+                dh_table, Q_m[i], loads[i], k, steps, tol, max_iterations, Q_k[i], F[i],
+                tips[i], Js[i])
+        else:
+            status[i], iterations[i], residual[i] = _solve_sample(
+                dh_table, Q_m[i], loads[i], inverse, mode == _FIXED_POINT, k, Q_k0[i], tol,
+                max_iterations, Q_k[i], F[i], tips[i], Js[i])
+
+
+def _rows(x: npt.NDArray[np.float64], batch: tuple[int, ...], n: int):
+    """``x`` (batch + (n,), or broadcastable to it) as C-contiguous writable rows (N, n).
+
+    Always the same array type, so that the compiled solver has a single specialization.
+    """
+    if x.shape[:-1] != batch:
+        x = np.broadcast_to(x, batch + (n,))
+    return np.require(x.reshape(-1, n), np.float64, ['C', 'W'])
+
+
+def _run(arm, q_m, load, load_name, load_unit, stiffness, q_k0, tol, max_iterations, *,
+         inverse, mode=_NEWTON, steps=1) -> ElastostaticSolution:
+    """Validate, broadcast, solve every sample in compiled code, shape the result."""
+    check_arm(arm)
+    q_m = check_batch('q_m', q_m, 3, 'rad')
+    load = check_batch(load_name, load, 3, load_unit)
+    if q_m.shape != load.shape:
+        q_m, load = _broadcast(q_m, load)
+    k = np.require(check_stiffness(stiffness), np.float64, ['C', 'W'])
+    tol, max_iterations = check_solver_options(tol, max_iterations)
+    batch = q_m.shape[:-1]
+    Q_m, loads = _rows(q_m, batch, 3), _rows(load, batch, 3)
+    N = len(Q_m)
+    Q_k0 = np.zeros((N, 4)) if q_k0 is None else _rows(check_batch('q_k0', q_k0, 4, 'rad'),
+                                                         batch, 4)
+    Q_k, F, tips, Js = np.empty((N, 4)), np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 6, 7))
+    counts, residual = np.empty((2, N), np.int64), np.empty(N)
+    _solve_rows(arm.dh_table, Q_m, loads, inverse, mode, k, Q_k0, tol, max_iterations, steps,
+                Q_k, F, tips, Js, counts[0], counts[1], residual)
+    codes, iterations = counts
+    if batch == ():
+        if codes[0] != _CONVERGED:
+            Q_k[0], F[0], tips[0], Js[0] = np.nan, np.nan, np.nan, np.nan
+        return ElastostaticSolution(F[0], Q_k[0], k * Q_k[0], tips[0], Js[0],
+                                    int(iterations[0]), float(residual[0]),
+                                    STATUS_NAMES[codes[0]])
+    bad = codes != _CONVERGED
+    if bad.any():
+        for array in (Q_k, F, tips, Js):
+            array[bad] = np.nan
+    return ElastostaticSolution(
+        F.reshape(batch + (3,)), Q_k.reshape(batch + (4,)), (k * Q_k).reshape(batch + (4,)),
+        tips.reshape(batch + (3,)), Js.reshape(batch + (6, 7)), iterations.reshape(batch),
+        residual.reshape(batch), _STATUS_ARRAY[codes].reshape(batch))
+
+
+def spring_deflections(
+    arm: object,
+    q_m: npt.ArrayLike,
+    force: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
+    *,
+    q_k0: npt.ArrayLike | None = None,
+    tol: float = DEFAULT_TOLERANCE,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
+) -> ElastostaticSolution:
+    """Spring deflections of the arm holding a tip force, eqs (5)-(7) of 000_ce37cf035a0a87c6.
+
+    Solves the equilibrium ``k q_k = U_k(q_m, q_k)^T f`` (nonlinear in q_k through the
+    Jacobian) by Newton's method with the matrix K - H_kk and a backtracking line search; the
+    equilibrium found must be stable and within the model range.
 
     Parameters
     ----------
     arm : FlexibleArm
         The 7-DOF arm of Table 2.
-    q : array-like, shape (7,)
-        Joint angles [rad], DH order.
-    force : array-like, shape (3,)
-        Tip force f [N], base frame.
+    q_m : array-like, shape (..., 3)
+        Motor angles [rad], DH joints 1, 2, 5.
+    force : array-like, shape (..., 3)
+        Tip force f [N], base frame (broadcast against ``q_m``).
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad], shared or per spring (see ``check_stiffness``).
+    q_k0 : array-like, shape (..., 4), optional
+        Initial guess [rad] (warm start); zeros by default.
+    tol : float, optional
+        Residual tolerance max |k q_k - U_k^T f| [N·m], positive.
+    max_iterations : int, optional
+        Newton iterations allowed, >= 1.
 
     Returns
     -------
-    ndarray, shape (7, 7)
-        Symmetric H [N·m/rad], DH order.
+    ElastostaticSolution
+        NaN where ``converged`` is False.
 
     Raises
     ------
     ValueError
-        If ``q`` or ``force`` has the wrong shape or is not finite.
+        On arguments of the wrong shape, non-finite values, non-positive stiffness or
+        tolerances.
     """
-    J = arm.jacobian(_q7(q))
-    f = check_vector('force', force, 3, 'N')
-    U, Z = J[:3], J[3:]
-    skew = np.array([[0.0, -f[2], f[1]], [f[2], 0.0, -f[0]], [-f[1], f[0], 0.0]])
-    # M[a, b] = (f x z_a) . u_b = z_a . (u_b x f), valid for a <= b.
-    M = (skew @ Z).T @ U
-    upper = np.triu(M)
-    return upper + np.triu(M, 1).T
+    return _run(arm, q_m, force, 'force', 'N', stiffness, q_k0, tol, max_iterations,
+                inverse=False)
+
+
+def solve_load_fixed_point(
+    arm: object,
+    q_m: npt.ArrayLike,
+    tau_m: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
+    *,
+    q_k0: npt.ArrayLike | None = None,
+    tol: float = DEFAULT_TOLERANCE,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
+) -> ElastostaticSolution:
+    """Load and deflections from motor torques by the fixed point of Fig. 5 of 000_....
+
+    Iterates f = U_m^-T tau_m (eq. 6), q_k = U_k^T f / k (eq. 7) from q_k0 until the residual
+    of eq. (7) is below ``tol``. It contracts only while the load's geometric stiffness stays
+    small against k (the package README gives measured failure rates); ``solve_load_newton``
+    does not need that.
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    q_m : array-like, shape (..., 3)
+        Motor angles [rad], DH joints 1, 2, 5.
+    tau_m : array-like, shape (..., 3)
+        Motor torques [N·m] (eq. 6 convention), broadcast against ``q_m``.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad], shared or per spring (see ``check_stiffness``).
+    q_k0 : array-like, shape (..., 4), optional
+        Start [rad]; zeros (the rigid arm) by default.
+    tol : float, optional
+        Residual tolerance [N·m], positive.
+    max_iterations : int, optional
+        Iterations allowed, >= 1.
+
+    Returns
+    -------
+    ElastostaticSolution
+
+    Raises
+    ------
+    ValueError
+        On arguments of the wrong shape, non-finite values, non-positive stiffness or
+        tolerances.
+    """
+    return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, q_k0, tol, max_iterations,
+                inverse=True, mode=_FIXED_POINT)
+
+
+def solve_load_newton(
+    arm: object,
+    q_m: npt.ArrayLike,
+    tau_m: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
+    *,
+    q_k0: npt.ArrayLike | None = None,
+    tol: float = DEFAULT_TOLERANCE,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
+) -> ElastostaticSolution:
+    """Load and deflections from motor torques by Newton's method on the reduced residual.
+
+    With f(q_k) = U_m^-T tau_m (eq. 6 of 000_ce37cf035a0a87c6) eliminated, solves
+    g(q_k) = K q_k - U_k^T f(q_k) = 0 (eq. 7) with the derivative D of
+    ``reduced_newton_matrix`` and a backtracking line search on |g|^2, from q_k0.
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    q_m : array-like, shape (..., 3)
+        Motor angles [rad], DH joints 1, 2, 5.
+    tau_m : array-like, shape (..., 3)
+        Motor torques [N·m] (eq. 6 convention), broadcast against ``q_m``.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad], shared or per spring (see ``check_stiffness``).
+    q_k0 : array-like, shape (..., 4), optional
+        Start [rad] (a warm start); zeros (the rigid arm) by default.
+    tol : float, optional
+        Residual tolerance [N·m], positive.
+    max_iterations : int, optional
+        Newton iterations allowed, >= 1.
+
+    Returns
+    -------
+    ElastostaticSolution
+
+    Raises
+    ------
+    ValueError
+        On arguments of the wrong shape, non-finite values, non-positive stiffness or
+        tolerances.
+    """
+    return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, q_k0, tol, max_iterations,
+                inverse=True)
+
+
+def solve_load_continuation(
+    arm: object,
+    q_m: npt.ArrayLike,
+    tau_m: npt.ArrayLike,
+    stiffness: npt.ArrayLike,
+    *,
+    steps: int = 8,
+    tol: float = DEFAULT_TOLERANCE,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
+) -> ElastostaticSolution:
+    """Load and deflections from motor torques by continuation from the unloaded arm.
+
+    Follows the solution of ``solve_load_newton`` while the torques grow from 0 to tau_m:
+    lambda tau_m for lambda = 1/steps, 2/steps, ..., 1, each solved from the previous
+    solution, an increment that fails halved (down to 1/(8 steps)). It finds the branch of the
+    unloaded arm where a direct Newton solve from q_k = 0 fails.
+    Parameters
+    ----------
+    arm : FlexibleArm
+        The 7-DOF arm of Table 2.
+    q_m : array-like, shape (..., 3)
+        Motor angles [rad], DH joints 1, 2, 5.
+    tau_m : array-like, shape (..., 3)
+        Motor torques [N·m] (eq. 6 convention), broadcast against ``q_m``.
+    stiffness : float or array-like, shape (4,)
+        Spring stiffness [N·m/rad], shared or per spring (see ``check_stiffness``).
+    steps : int, optional
+        Increments of lambda, >= 1.
+    tol : float, optional
+        Residual tolerance [N·m], positive.
+    max_iterations : int, optional
+        Newton iterations allowed per increment, >= 1.
+
+    Returns
+    -------
+    ElastostaticSolution
+        ``iterations`` summed over the increments.
+
+    Raises
+    ------
+    ValueError
+        On arguments of the wrong shape, non-finite values, non-positive stiffness or
+        tolerances, or ``steps`` < 1.
+    """
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f'expected steps an integer >= 1, got {steps!r}')
+    return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, None, tol, max_iterations,
+                inverse=True, mode=_CONTINUATION, steps=int(steps))
+
+
+
+def warm_up(arm: object | None = None) -> None:
+    """Compile every kernel of this module, or load it from numba's on-disk cache.
+
+    The kernels compile on their first call (about a minute on a 2-core machine, once per
+    source change; later processes load them from the cache in ``__pycache__`` in well under
+    a second). Call this where a first call must not be slow: at set-up, or before a node
+    starts its timers.
+
+    Parameters
+    ----------
+    arm : FlexibleArm, optional
+        The arm to solve for; a default ``FlexibleArm`` if None.
+    """
+    if arm is None:
+        from inflarm_model.kinematics import FlexibleArm  # noqa: PLC0415 (only when needed)
+
+        arm = FlexibleArm()
+    q_m, force = np.array([0.3, 0.8, -1.2]), np.array([0.0, 10.0, -15.0])
+    equilibrium = spring_deflections(arm, q_m, force, DEFAULT_STIFFNESS)
+    q = np.empty(7)
+    q[list(_M)], q[list(_S)] = q_m, equilibrium.q_k
+    tau_m = motor_torques(arm, q, force)
+    for solver in (solve_load_newton, solve_load_fixed_point, solve_load_continuation):
+        solver(arm, q_m, tau_m, DEFAULT_STIFFNESS)
+    J = equilibrium.jacobian
+    conditioning(J, force, np.full(4, DEFAULT_STIFFNESS))
+    H = load_hessian(J, force)
+    reduced_newton_matrix(J, H, np.full(4, DEFAULT_STIFFNESS))
+
+
+if __name__ == '__main__':
+    warm_up()

@@ -12,13 +12,16 @@ J_i = [z_{i-1} x (p_e - p_{i-1}); z_{i-1}] (eq. 4); columns follow the DH joint 
 Three independent implementations are kept, each checking the others in the tests:
 
 - single configurations go through Pinocchio, built from the URDF of ``inflarm_model.urdf``;
-- batches go through a vectorized numpy recursion on the frame axes;
+- batches go through ``dh_chain_kinematics``, the DH recursion on the frame axes compiled with
+  numba (also the kinematics inside the compiled elastostatic solvers of
+  ``inflarm_model.elastostatics``);
 - ``dh_fk_reference`` / ``dh_jacobian_reference`` are the textbook per-joint 4x4 chain.
 """
 
 from collections.abc import Sequence
 import math
 
+from numba import njit
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
@@ -27,8 +30,10 @@ from inflarm_model.urdf import (
     DEFAULT_LINK_LENGTH,
     DEFAULT_SPRING_OFFSET,
     FLEXIBLE_JOINT_NAMES,
+    MOTOR_INDICES,
     MOTOR_JOINT_NAMES,
     RIGID_JOINT_NAMES,
+    SPRING_INDICES,
     SPRING_JOINT_NAMES,
     TIP_LINK,
     check_dh_table,
@@ -43,6 +48,7 @@ __all__ = [
     'RigidArm',
     'dh_fk_reference',
     'dh_frames_reference',
+    'dh_chain_kinematics',
     'dh_jacobian_reference',
     'dh_transform',
 ]
@@ -54,8 +60,6 @@ _hypot = math.hypot
 _frame_jacobian = pin.computeFrameJacobian
 _frames_forward_kinematics = pin.framesForwardKinematics
 _LOCAL_WORLD_ALIGNED = pin.LOCAL_WORLD_ALIGNED
-
-_BATCH_CHUNK = 1024  # configurations per vectorized pass, see DHChain._fill_batch
 
 
 def _vector(name: str, x: npt.ArrayLike, n: int) -> npt.NDArray[np.float64]:
@@ -218,6 +222,71 @@ def dh_jacobian_reference(
     return J
 
 
+# --- compiled recursion ----------------------------------------------------------------------
+
+
+@njit(cache=True)
+def dh_chain_kinematics(dh_table, q, pose, jacobian, origins):
+    """Tip pose, geometric Jacobian (eq. 4) and frame origins of one configuration.
+
+    The DH recursion on the frame axes: with R_{i-1} = [x y z] and origin p_{i-1}, row i gives
+    x' = c x + s y, y' = c y - s x (Rz(theta_i)), p_i = p_{i-1} + a_i x' + d_i z, then
+    R_i = [x', ca y' + sa z, ca z - sa y'] (Rx(alpha_i)); J_i = [z_{i-1} x (p_e - p_{i-1});
+    z_{i-1}]. Compiled with numba (nopython); callable from Python and from compiled code.
+
+    Parameters
+    ----------
+    dh_table : ndarray, shape (n, 3)
+        Rows ``(a_i [m], alpha_i [rad], d_i [m])`` (``check_dh_table``).
+    q : ndarray, shape (n,)
+        Joint angles [rad], finite.
+    pose : ndarray, shape (4, 4)
+        Output: tip pose T_0^n in the base frame [m].
+    jacobian : ndarray, shape (6, n)
+        Output: linear rows [m/rad] then joint axes, base-frame axes.
+    origins : ndarray, shape (n + 1, 3)
+        Output: origins of DH frames 0..n [m], base frame.
+    """
+    n = dh_table.shape[0]
+    x0, x1, x2 = 1.0, 0.0, 0.0
+    y0, y1, y2 = 0.0, 1.0, 0.0
+    z0, z1, z2 = 0.0, 0.0, 1.0
+    p0, p1, p2 = 0.0, 0.0, 0.0
+    origins[0, 0], origins[0, 1], origins[0, 2] = 0.0, 0.0, 0.0
+    for i in range(n):
+        jacobian[3, i], jacobian[4, i], jacobian[5, i] = z0, z1, z2
+        a, alpha, d = dh_table[i, 0], dh_table[i, 1], dh_table[i, 2]
+        c, s = math.cos(q[i]), math.sin(q[i])
+        ca, sa = math.cos(alpha), math.sin(alpha)
+        x0, x1, x2, y0, y1, y2 = (c * x0 + s * y0, c * x1 + s * y1, c * x2 + s * y2,
+                                  c * y0 - s * x0, c * y1 - s * x1, c * y2 - s * x2)
+        p0, p1, p2 = p0 + a * x0 + d * z0, p1 + a * x1 + d * z1, p2 + a * x2 + d * z2
+        y0, y1, y2, z0, z1, z2 = (ca * y0 + sa * z0, ca * y1 + sa * z1, ca * y2 + sa * z2,
+                                  ca * z0 - sa * y0, ca * z1 - sa * y1, ca * z2 - sa * y2)
+        origins[i + 1, 0], origins[i + 1, 1], origins[i + 1, 2] = p0, p1, p2
+    for i in range(n):
+        r0 = p0 - origins[i, 0]
+        r1 = p1 - origins[i, 1]
+        r2 = p2 - origins[i, 2]
+        a0, a1, a2 = jacobian[3, i], jacobian[4, i], jacobian[5, i]
+        jacobian[0, i] = a1 * r2 - a2 * r1
+        jacobian[1, i] = a2 * r0 - a0 * r2
+        jacobian[2, i] = a0 * r1 - a1 * r0
+    pose[0, 0], pose[1, 0], pose[2, 0] = x0, x1, x2
+    pose[0, 1], pose[1, 1], pose[2, 1] = y0, y1, y2
+    pose[0, 2], pose[1, 2], pose[2, 2] = z0, z1, z2
+    pose[0, 3], pose[1, 3], pose[2, 3] = p0, p1, p2
+    pose[3, 0], pose[3, 1], pose[3, 2], pose[3, 3] = 0.0, 0.0, 0.0, 1.0
+
+
+@njit(cache=True)
+def _dh_chain_rows(dh_table, Q, poses, jacobians):
+    """``dh_chain_kinematics`` of every row of Q (N, n) into poses (N, 4, 4), J (N, 6, n)."""
+    origins = np.empty((dh_table.shape[0] + 1, 3))
+    for i in range(Q.shape[0]):
+        dh_chain_kinematics(dh_table, Q[i], poses[i], jacobians[i], origins)
+
+
 # --- the arms --------------------------------------------------------------------------------
 
 
@@ -225,7 +294,8 @@ class DHChain:
     """Serial revolute arm given by a standard DH table.
 
     Single configurations are evaluated with Pinocchio on a model built from the chain's URDF
-    (``inflarm_model.urdf.dh_chain_urdf``); batches with a vectorized numpy recursion.
+    (``inflarm_model.urdf.dh_chain_urdf``); batches with the compiled recursion
+    ``dh_chain_kinematics``.
 
     Parameters
     ----------
@@ -268,15 +338,6 @@ class DHChain:
         # A live reference into data.oMf, refreshed by every kinematic pass: indexing oMf on
         # every call would cost about 1 us.
         self._tip = self._data.oMf[self._tip_id]
-        # Per-joint constants of the batch recursion. Twists of +-pi/2 (most of Table 2) are
-        # taken as exact quarter turns, cos = 0 rather than 6e-17, to skip half the products.
-        a, alpha, d = table.T
-        ca, sa = np.cos(alpha), np.sin(alpha)
-        ca[np.abs(ca) < 1e-15] = 0.0
-        self._batch_rows = tuple(
-            zip(a.tolist(), ca.tolist(), sa.tolist(), d.tolist(), strict=True)
-        )
-
     @property
     def n_joints(self) -> int:
         """Number of joints n."""
@@ -370,71 +431,15 @@ class DHChain:
         J = _frame_jacobian(self._model, self._data, q, self._tip_id, _LOCAL_WORLD_ALIGNED)
         return self._tip.homogeneous, J
 
-    def _frames_chunk(
-        self, Q: npt.NDArray[np.float64]
-    ) -> list[tuple[npt.NDArray[np.float64], ...]]:
-        """Vectorized DH recursion on the frame axes for a chunk of configurations.
-
-        With R_{i-1} = [x y z] (each axis a (3, N) array) and origin p_{i-1}, row i gives
-        x' = c x + s y, y' = c y - s x (Rz(theta_i)), p_i = p_{i-1} + a_i x' + d_i z, then
-        R_i = [x', ca y' + sa z, ca z - sa y'] (Rx(alpha_i)).
-
-        Returns
-        -------
-        list of (x, y, z, p), length n + 1
-            Axes and origin of DH frames 0..n, each of shape (3, N).
-        """
-        N = Q.shape[0]
-        x, y, z = (np.repeat(e[:, None], N, axis=1) for e in np.eye(3))
-        p = np.zeros((3, N))
-        frames = [(x, y, z, p)]
-        Qt = np.ascontiguousarray(Q.T)  # contiguous rows: the products below vectorize
-        cos_q, sin_q = np.cos(Qt), np.sin(Qt)
-        for i, (a, ca, sa, d) in enumerate(self._batch_rows):
-            c, s = cos_q[i], sin_q[i]
-            x, y = c * x + s * y, c * y - s * x
-            if a != 0.0:
-                p = p + a * x
-            if d != 0.0:
-                p = p + d * z
-            if ca == 0.0:
-                y, z = sa * z, -sa * y
-            elif sa != 0.0:
-                y, z = ca * y + sa * z, ca * z - sa * y
-            frames.append((x, y, z, p))
-        return frames
-
-    def _fill_batch(
-        self,
-        Q: npt.NDArray[np.float64],
-        poses: npt.NDArray[np.float64] | None,
-        jacobians: npt.NDArray[np.float64] | None,
-    ) -> None:
-        """Write tip poses (N, 4, 4) and/or Jacobians (N, 6, n) of the rows of Q."""
-        # Chunks keep the (3, chunk) temporaries in cache: on N = 10,000 in one pass, page
-        # faults and cache misses on ~100 fresh 240 kB arrays cost more than the arithmetic.
-        for start in range(0, Q.shape[0], _BATCH_CHUNK):
-            stop = start + _BATCH_CHUNK
-            frames = self._frames_chunk(Q[start:stop])
-            x, y, z, p_e = frames[-1]
-            if poses is not None:
-                T = poses[start:stop]
-                T[:, :3, 0] = x.T
-                T[:, :3, 1] = y.T
-                T[:, :3, 2] = z.T
-                T[:, :3, 3] = p_e.T
-                T[:, 3, :3] = 0.0
-                T[:, 3, 3] = 1.0
-            if jacobians is not None:
-                # Eq. (4) for all joints at once: Z, R are (3, n, chunk) stacks of z_{i-1}
-                # and p_e - p_{i-1}.
-                Z = np.stack([f[2] for f in frames[:-1]], axis=1)
-                R = p_e[:, None, :] - np.stack([f[3] for f in frames[:-1]], axis=1)
-                J = jacobians[start:stop]
-                J[:, 0] = (Z[1] * R[2] - Z[2] * R[1]).T
-                J[:, 1] = (Z[2] * R[0] - Z[0] * R[2]).T
-                J[:, 2] = (Z[0] * R[1] - Z[1] * R[0]).T
-                J[:, 3:] = Z.transpose(2, 0, 1)
+    def _batch_pass(
+        self, Q: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Tip poses (N, 4, 4) and Jacobians (N, 6, n) of the rows of Q, compiled."""
+        Q = np.ascontiguousarray(_batch('Q', Q, self._n))
+        poses = np.empty((Q.shape[0], 4, 4))
+        jacobians = np.empty((Q.shape[0], 6, self._n))
+        _dh_chain_rows(self._dh_table, Q, poses, jacobians)
+        return poses, jacobians
 
     def fk_batch(self, Q: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Tip poses of many configurations, vectorized.
@@ -454,10 +459,7 @@ class DHChain:
         ValueError
             If ``Q`` has the wrong shape or is not finite.
         """
-        Q = _batch('Q', Q, self._n)
-        poses = np.empty((Q.shape[0], 4, 4))
-        self._fill_batch(Q, poses, None)
-        return poses
+        return self._batch_pass(Q)[0]
 
     def jacobian_batch(self, Q: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Geometric Jacobians (eq. 4) of many configurations, vectorized.
@@ -477,10 +479,7 @@ class DHChain:
         ValueError
             If ``Q`` has the wrong shape or is not finite.
         """
-        Q = _batch('Q', Q, self._n)
-        jacobians = np.empty((Q.shape[0], 6, self._n))
-        self._fill_batch(Q, None, jacobians)
-        return jacobians
+        return self._batch_pass(Q)[1]
 
     def fk_and_jacobian_batch(
         self, Q: npt.ArrayLike
@@ -504,11 +503,7 @@ class DHChain:
         ValueError
             If ``Q`` has the wrong shape or is not finite.
         """
-        Q = _batch('Q', Q, self._n)
-        poses = np.empty((Q.shape[0], 4, 4))
-        jacobians = np.empty((Q.shape[0], 6, self._n))
-        self._fill_batch(Q, poses, jacobians)
-        return poses, jacobians
+        return self._batch_pass(Q)
 
     def joint_origins(self, q: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Origins of the base, every DH frame and the tip, for plots and collision checks.
@@ -530,7 +525,10 @@ class DHChain:
             If ``q`` has the wrong shape or is not finite.
         """
         q = _vector('q', q, self._n)
-        return np.array([p[:, 0] for _, _, _, p in self._frames_chunk(q[None, :])])
+        origins = np.empty((self._n + 1, 3))
+        dh_chain_kinematics(self._dh_table, q, np.empty((4, 4)), np.empty((6, self._n)),
+                            origins)
+        return origins
 
 
 class RigidArm(DHChain):
@@ -585,8 +583,8 @@ class FlexibleArm(DHChain):
     JOINT_NAMES = FLEXIBLE_JOINT_NAMES
     MOTOR_JOINT_NAMES = MOTOR_JOINT_NAMES
     SPRING_JOINT_NAMES = SPRING_JOINT_NAMES
-    MOTOR_INDICES = (0, 1, 4)
-    SPRING_INDICES = (2, 3, 5, 6)
+    MOTOR_INDICES = MOTOR_INDICES
+    SPRING_INDICES = SPRING_INDICES
 
     def __init__(
         self,

@@ -39,6 +39,11 @@ import numpy.typing as npt
 CHAMBERS = ('PEA', 'B1', 'B2', 'B3', 'B4')
 """Pressure channels in command order; PEA is PEA1 and PEA2 joined by the T-pipe (one pressure)."""
 
+CHAMBER_MAX_PRESSURE = 100e3
+"""Highest gauge pressure a chamber is commanded to [Pa]: the simulated PEA reaches the top of the
+positive-pressure work space (z = 0.99 m) at 100 kPa, and the bellows their full bend below it.
+The default of the controller's output limit and of the simulator's accepted commands."""
+
 BELLOWS_PUSH = {
     'B1': (0.0, -1.0),
     'B2': (-1.0, 0.0),
@@ -251,6 +256,44 @@ def central_axes(end_point: npt.ArrayLike) -> npt.NDArray[np.float64]:
     joint[..., 2] = l1
     return np.stack([np.stack([np.zeros(p.shape), joint], axis=-2),
                      np.stack([joint, p], axis=-2)], axis=-3)
+
+
+def check_chamber_pressures(
+    pressures: dict[str, float], max_pressure: float = CHAMBER_MAX_PRESSURE
+) -> dict[str, float]:
+    """Validate set pressures by chamber name: known chambers, each within 0..``max_pressure``.
+
+    Parameters
+    ----------
+    pressures : dict of str to float
+        Some of `CHAMBERS` -> gauge pressure [Pa] (the valves give positive pressure only).
+    max_pressure : float
+        The chambers' rating [Pa].
+
+    Returns
+    -------
+    dict of str to float
+        The same pressures, as floats.
+
+    Raises
+    ------
+    ValueError
+        Naming the chamber and the problem, e.g. ``'PEA at 1e+300 Pa is outside 0..100000 Pa'``.
+    """
+    unknown = sorted(set(pressures) - set(CHAMBERS))
+    if unknown:
+        raise ValueError(f'unknown chambers {unknown}, expected some of {list(CHAMBERS)}')
+    if not pressures:
+        raise ValueError('no chamber named')
+    checked = {}
+    for name, value in pressures.items():
+        pressure = float(value)
+        if not 0.0 <= pressure <= max_pressure:  # NaN fails too
+            raise ValueError(f'{name} at {pressure:.6g} Pa is outside 0..{max_pressure:.0f} Pa '
+                             '(the valves give positive pressure only, up to the chamber '
+                             'rating)')
+        checked[name] = pressure
+    return checked
 
 
 def check_in_workspace(

@@ -20,10 +20,28 @@ The spring stiffness of eq. (2)/(7) is recorded per spring joint as a custom ele
 ``INFLARM_XMLNS`` namespace, ``<inflarm:spring joint="spring_1" stiffness="172.71"/>``, a
 direct child of ``<robot>``. URDF parsers (urdfdom, hence Pinocchio and robot_state_publisher)
 skip elements they do not know; ``spring_stiffness_from_urdf`` reads it back.
+
+Joint limits come from one table, ``JOINT_LIMITS``: the motor limits the simulated arm
+(``inflarm_hw.inflatable_arm_sim``) clamps its targets to, and the spring range
+``SPRING_DEFLECTION_LIMIT`` (|q_k| <= pi/2) outside which the elastostatic model
+(``inflarm_model.elastostatics``) rejects a solution. The paper gives no limits: the motor ones
+are our choice (see ``JOINT_LIMITS``).
+
+Masses. Each body of an inflatable link carries an ``<inertial>`` for its share of the
+PVC-coated fabric tube of section 3 (r = 55 mm, t = 0.5 mm, ``FABRIC_DENSITY``) and of the two
+rigid end caps (``CAP_MASS`` each, at the link's ends), and a ``<collision>`` cylinder equal to
+its visual. The paper gives neither the fabric density nor the cap mass; the values are
+assumptions stated where they are defined. A default link weighs 0.295 kg.
+
+The URDF of the default arm is checked in as ``urdf/inflarm_flexible.urdf`` and installed to
+``share/inflarm_model/urdf/``; regenerate it with ``python -m inflarm_model.urdf
+inflarm_model/urdf`` (a test keeps it equal to ``flexible_arm_urdf()``).
 """
 
+import argparse
 from collections.abc import Mapping, Sequence
 import math
+from pathlib import Path
 import re
 import xml.etree.ElementTree as ET
 from xml.sax.saxutils import quoteattr
@@ -44,17 +62,64 @@ RIGID_JOINT_NAMES = MOTOR_JOINT_NAMES
 FLEXIBLE_JOINT_NAMES = (
     'joint_1', 'joint_2', 'spring_1', 'spring_2', 'joint_3', 'spring_3', 'spring_4',
 )
+# Positions of the motors and springs in q (DH order): the one definition every module uses.
+MOTOR_INDICES = tuple(FLEXIBLE_JOINT_NAMES.index(name) for name in MOTOR_JOINT_NAMES)
+SPRING_INDICES = tuple(FLEXIBLE_JOINT_NAMES.index(name) for name in SPRING_JOINT_NAMES)
 
 DEFAULT_LINK_LENGTH = 0.6  # L [m], prototype of section 3
 DEFAULT_SPRING_OFFSET = 0.03  # l1 [m], first wrinkle position, section 4
 DEFAULT_RADIUS = 0.055  # r [m], prototype of section 3
 DEFAULT_STIFFNESS = 172.71  # mean k [N m/rad] over Table 3, section 4
+DEFAULT_WALL_THICKNESS = 0.5e-3  # t [m], prototype of section 3
+# Assumptions (the paper gives neither): PVC-coated polyester fabric of 1300 kg/m^3 (PVC is
+# 1300-1450, polyester 1380; 0.65 kg/m^2 at t = 0.5 mm), and each rigid cap a PVC disc of the
+# link radius, 5 mm thick (66 g), with its steel band (10 x 0.5 mm, 14 g): 80 g.
+FABRIC_DENSITY = 1300.0  # [kg/m^3]
+CAP_MASS = 0.08  # [kg]
 
-# The paper gives no joint limits; URDF requires <limit> on revolute joints, so these are
-# placeholders wide enough never to bind (one full turn for motors and springs alike).
-_LIMIT = f'<limit lower="{-math.pi!r}" upper="{math.pi!r}" effort="1000.0" velocity="10.0"/>'
+# Largest spring deflection of the pseudo-rigid-body model [rad]: beyond a quarter turn the two
+# bodies of a link would fold onto each other, and nothing of eq. (2) holds.
+SPRING_DEFLECTION_LIMIT = 0.5 * math.pi
+# Position limits [rad] of every joint, by name: the one table the URDF, the simulated arm, the
+# estimator and the IK check angles against. The paper gives none; ours keep the arm out of
+# itself: the base turns a full turn, the shoulder lifts the first link up to 90 degrees either
+# way, the elbow folds to 150 degrees, and the virtual springs stay within the +-90 degrees where
+# the pseudo-rigid model means anything (SPRING_DEFLECTION_LIMIT, the estimator's model range).
+JOINT_LIMITS = {
+    'joint_1': (-math.pi, math.pi),
+    'joint_2': (-0.5 * math.pi, 0.5 * math.pi),
+    'joint_3': (-2.618, 2.618),
+    **{name: (-SPRING_DEFLECTION_LIMIT, SPRING_DEFLECTION_LIMIT) for name in SPRING_JOINT_NAMES},
+}
+_WIDE_LIMIT = (-math.pi, math.pi)  # joints of other chains (the rigid arm of Table 1)
+# Motor speed limit [rad/s]: the simulated motors' rate limit (ArmSimParams' default).
+MOTOR_MAX_VELOCITY = 1.0
+# Motor torque limit [N·m]: our choice, above the 180 N·m that 150 N at full reach (1.2 m)
+# needs; the simulated motors are not torque-limited.
+MOTOR_MAX_EFFORT = 200.0
+# A spring is not driven: the speed and torque of its <limit> are placeholders (k pi/2 at
+# k = 172.71 for the torque), as for joints of other chains.
+_SPRING_VELOCITY, _SPRING_EFFORT = 10.0, 271.3
 _FABRIC_RGBA = '0.93 0.93 0.88 1.0'  # PVC-coated fabric, off-white
 _NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_.-]*')
+
+
+def _limit(name: str) -> str:
+    """The URDF ``<limit>`` of joint ``name``: JOINT_LIMITS, and the motors' speed and torque."""
+    lower, upper = JOINT_LIMITS.get(name, _WIDE_LIMIT)
+    velocity, effort = ((MOTOR_MAX_VELOCITY, MOTOR_MAX_EFFORT) if name in MOTOR_JOINT_NAMES
+                        else (_SPRING_VELOCITY, _SPRING_EFFORT))
+    return (f'<limit lower="{_fmt(lower)}" upper="{_fmt(upper)}" effort="{_fmt(effort)}" '
+            f'velocity="{_fmt(velocity)}"/>')
+
+
+def check_joint_positions(names, positions) -> None:
+    """Raise ValueError naming the first joint whose position is outside `JOINT_LIMITS`."""
+    for name, position in zip(names, positions, strict=True):
+        lower, upper = JOINT_LIMITS.get(name, _WIDE_LIMIT)
+        if not lower <= position <= upper:
+            raise ValueError(f'{name} at {position:.6g} rad is outside its limits '
+                             f'[{lower:.4g}, {upper:.4g}] rad')
 
 
 def _positive(name: str, value: float, what: str) -> float:
@@ -200,20 +265,82 @@ def _origin(xyz: Sequence[float], rpy: Sequence[float]) -> str:
     )
 
 
-def _segment_visual(a: float, d: float, radius: float) -> str:
-    """Cylinder along the DH segment from the link origin to (a, 0, d) in the link frame."""
+def _segment_geometry(a: float, d: float, radius: float) -> tuple[str, str] | None:
+    """Origin and cylinder of the DH segment from the link origin to (a, 0, d), link frame."""
     length = math.hypot(a, d)
     if length == 0.0:
-        return ''
+        return None
     # URDF cylinders lie along z; pitching by atan2(a, d) turns z onto (a, 0, d) / length.
-    return (
-        '    <visual>\n'
-        f'      {_origin((a / 2, 0.0, d / 2), (0.0, math.atan2(a, d), 0.0))}\n'
-        f'      <geometry><cylinder radius="{_fmt(radius)}" length="{_fmt(length)}"/>'
-        '</geometry>\n'
-        '      <material name="fabric"/>\n'
-        '    </visual>\n'
+    return (_origin((a / 2, 0.0, d / 2), (0.0, math.atan2(a, d), 0.0)),
+            f'<geometry><cylinder radius="{_fmt(radius)}" length="{_fmt(length)}"/></geometry>')
+
+
+def segment_inertia(
+    length: float, radius: float, thickness: float, caps: tuple[int, int]
+) -> tuple[float, float, float, float]:
+    """Mass properties of one body of an inflatable link: a tube and its end caps.
+
+    The tube is a thin wall of ``FABRIC_DENSITY`` (mass 2 pi r t l rho); a cap is a thin disc of
+    ``CAP_MASS`` and the tube's radius at one end of the body.
+
+    Parameters
+    ----------
+    length : float
+        Body length l [m] along its axis.
+    radius : float
+        Tube radius r [m].
+    thickness : float
+        Wall thickness t [m].
+    caps : (int, int)
+        Number of caps (0 or 1) at the proximal (s = 0) and distal (s = l) end.
+
+    Returns
+    -------
+    mass : float
+        [kg].
+    center : float
+        Centre of mass along the axis, from the proximal end [m].
+    axial, transverse : float
+        Moments of inertia about the axis and about a transverse axis through the centre of
+        mass [kg m^2].
+    """
+    tube = 2.0 * math.pi * radius * thickness * length * FABRIC_DENSITY
+    proximal, distal = CAP_MASS * caps[0], CAP_MASS * caps[1]
+    mass = tube + proximal + distal
+    center = (tube * length / 2 + distal * length) / mass
+    axial = tube * radius**2 + (proximal + distal) * radius**2 / 2
+    transverse = (tube * (radius**2 / 2 + length**2 / 12 + (length / 2 - center) ** 2)
+                  + proximal * (radius**2 / 4 + center**2)
+                  + distal * (radius**2 / 4 + (length - center) ** 2))
+    return mass, center, axial, transverse
+
+
+def _segment_elements(a: float, d: float, radius: float, thickness: float,
+                      caps: tuple[int, int] | None) -> str:
+    """Visual, collision and (with ``caps``) inertial of the segment to (a, 0, d)."""
+    geometry = _segment_geometry(a, d, radius)
+    if geometry is None:
+        return ''
+    origin, cylinder = geometry
+    text = (
+        f'    <visual>\n      {origin}\n      {cylinder}\n'
+        '      <material name="fabric"/>\n    </visual>\n'
+        f'    <collision>\n      {origin}\n      {cylinder}\n    </collision>\n'
     )
+    if caps is None:
+        return text
+    length = math.hypot(a, d)
+    mass, center, axial, transverse = segment_inertia(length, radius, thickness, caps)
+    ux, uz = a / length, d / length
+    return text + (
+        '    <inertial>\n'
+        f'      {_origin((center * ux, 0.0, center * uz), (0.0, math.atan2(a, d), 0.0))}\n'
+        f'      <mass value="{_fmt(mass)}"/>\n'
+        f'      <inertia ixx="{_fmt(transverse)}" ixy="0.0" ixz="0.0" iyy="{_fmt(transverse)}" '
+        f'iyz="0.0" izz="{_fmt(axial)}"/>\n'
+        '    </inertial>\n'
+    )
+
 
 
 def dh_chain_urdf(
@@ -222,6 +349,8 @@ def dh_chain_urdf(
     joint_names: Sequence[str],
     radius: float = DEFAULT_RADIUS,
     spring_stiffness: Mapping[str, float] | None = None,
+    caps: Mapping[str, tuple[int, int]] | None = None,
+    thickness: float = DEFAULT_WALL_THICKNESS,
 ) -> str:
     """URDF text of a serial revolute chain given by a standard DH table.
 
@@ -233,12 +362,19 @@ def dh_chain_urdf(
         Rows ``(a_i [m], alpha_i [rad], d_i [m])`` with
         T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i).
     joint_names : sequence of str, length n
-        Names of the revolute joints in DH order.
+        Names of the revolute joints in DH order; limits from ``JOINT_LIMITS`` (a full turn
+        for names not in it).
     radius : float
-        Radius [m] of the cylinder visuals drawn along the links.
+        Radius [m] of the cylinder visuals and collisions drawn along the links.
     spring_stiffness : mapping of str to float, optional
         Stiffness k [N m/rad] of eq. (2) per spring joint name, recorded as
         ``<inflarm:spring joint=... stiffness=.../>`` elements.
+    caps : mapping of str to (int, int), optional
+        Inflatable-link bodies: per joint name whose child link carries a segment, the caps
+        (0 or 1) at its proximal and distal end. Those links get an ``<inertial>`` from
+        ``segment_inertia``; without ``caps`` no link has one.
+    thickness : float
+        Tube wall thickness t [m] of the inertials.
 
     Returns
     -------
@@ -249,23 +385,28 @@ def dh_chain_urdf(
     Raises
     ------
     ValueError
-        On a malformed table, names of the wrong length or duplicated, a non-positive radius,
-        or a stiffness that is not positive and finite or names an unknown joint.
+        On a malformed table, names of the wrong length or duplicated, a non-positive radius
+        or thickness, a stiffness that is not positive and finite or names an unknown joint,
+        or caps for an unknown joint.
     """
     table = check_dh_table(dh_table)
     names = _check_joint_names(joint_names, table.shape[0])
     radius = _length('radius', radius)
+    thickness = _length('thickness', thickness)
     springs = {}
     for joint, k in (spring_stiffness or {}).items():
         if joint not in names:
             raise ValueError(f'expected spring_stiffness keys among {names}, got {joint!r}')
         springs[joint] = _positive(f'spring_stiffness[{joint!r}]', k, 'stiffness [N m/rad]')
+    caps = dict(caps or {})
+    if not set(caps) <= set(names):
+        raise ValueError(f'expected caps keys among {names}, got {sorted(caps)}')
 
     parts = [
         '<?xml version="1.0"?>\n',
         f'<robot name={quoteattr(robot_name)} xmlns:inflarm="{INFLARM_XMLNS}">\n',
-        '  <!-- Generated by inflarm_model.urdf from a standard DH table; '
-        'joint limits are placeholders. -->\n',
+        '  <!-- Generated by inflarm_model.urdf from a standard DH table; limits from '
+        'inflarm_model.urdf.JOINT_LIMITS, masses from its stated assumptions. -->\n',
     ]
     parts.append(f'  <material name="fabric"><color rgba="{_FABRIC_RGBA}"/></material>\n')
     parts += [
@@ -284,12 +425,12 @@ def dh_chain_urdf(
             f'    <child link="{child}"/>\n'
             f'    {_origin((prev_a, 0.0, prev_d), (prev_alpha, 0.0, 0.0))}\n'
             '    <axis xyz="0 0 1"/>\n'
-            f'    {_LIMIT}\n'
+            f'    {_limit(name)}\n'
             '  </joint>\n'
         )
-        visual = _segment_visual(a, d, radius)
+        body = _segment_elements(a, d, radius, thickness, caps.get(name))
         parts.append(
-            f'  <link name="{child}">\n{visual}  </link>\n' if visual
+            f'  <link name="{child}">\n{body}  </link>\n' if body
             else f'  <link name="{child}"/>\n'
         )
         parent, previous = child, (a, alpha, d)
@@ -328,7 +469,15 @@ def rigid_arm_urdf(
     ValueError
         If a length is not positive and finite.
     """
-    return dh_chain_urdf('inflarm_rigid', rigid_dh_table(link_length), RIGID_JOINT_NAMES, radius)
+    # Each rigid link is a whole inflatable link: both caps on it.
+    return dh_chain_urdf('inflarm_rigid', rigid_dh_table(link_length), RIGID_JOINT_NAMES, radius,
+                         caps={'joint_2': (1, 1), 'joint_3': (1, 1)})
+
+
+# Caps (proximal, distal) of the inflatable-link bodies of the flexible arm, by joint name.
+FLEXIBLE_CAPS: Mapping[str, tuple[int, int]] = {
+    'joint_2': (1, 0), 'spring_2': (0, 1), 'joint_3': (1, 0), 'spring_4': (0, 1),
+}
 
 
 def flexible_arm_urdf(
@@ -378,9 +527,12 @@ def flexible_arm_urdf(
             f'expected stiffness to be positive and finite [N m/rad], got {stiffness!r}'
         )
     k = np.broadcast_to(k, (4,))
+    # Link 1 is the bodies of joint_2 (l1, proximal cap) and spring_2 (l2, distal cap); link 2
+    # those of joint_3 and spring_4.
     return dh_chain_urdf(
         'inflarm_flexible', table, FLEXIBLE_JOINT_NAMES, radius,
         dict(zip(SPRING_JOINT_NAMES, k.tolist(), strict=True)),
+        caps=FLEXIBLE_CAPS,
     )
 
 
@@ -423,3 +575,23 @@ def spring_stiffness_from_urdf(text: str) -> dict[str, float]:
             )
         springs[joint] = _positive(f'stiffness of {joint!r}', value, 'stiffness [N m/rad]')
     return springs
+
+
+URDF_FILENAME = 'inflarm_flexible.urdf'
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Write the default arm's URDF to ``<directory>/inflarm_flexible.urdf``."""
+    parser = argparse.ArgumentParser(
+        description='Write the URDF of the default inflatable-link arm (flexible_arm_urdf()).')
+    parser.add_argument('directory', type=Path, help='where to write ' + URDF_FILENAME)
+    args = parser.parse_args(argv)
+    args.directory.mkdir(parents=True, exist_ok=True)
+    path = args.directory / URDF_FILENAME
+    path.write_text(flexible_arm_urdf(), encoding='utf-8')
+    print(path)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

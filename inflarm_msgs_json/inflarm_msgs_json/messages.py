@@ -81,6 +81,45 @@ class PlanRequest(Message):
     resolution: float = field_spec(POSITIVE, 'planning grid cell size [m]')
 
 
+PLAN_STATUSES = ('planned', 'no_path', 'rejected')
+
+
+@dataclass(frozen=True)
+class PlanOutcome(Message):
+    """Outcome of one plan request: the planned path's figures, or why there is none.
+
+    ``status`` is ``'planned'`` (a path was published), ``'no_path'`` (none exists; ``reason``
+    says which check failed) or ``'rejected'`` (the request itself was invalid). ``reason`` is
+    empty unless the status is ``'no_path'``; the figures are 0 unless it is ``'planned'``.
+    """
+
+    status: str = field_spec(Choice(PLAN_STATUSES), "'planned', 'no_path' or 'rejected'")
+    reason: str = field_spec(
+        Text(allow_empty=True),
+        "why there is no path, e.g. 'start_blocked' or 'no_connection'; '' otherwise",
+    )
+    message: str = field_spec(Text(allow_empty=True), 'what happened, for people and logs')
+    start: Vec3 = field_spec(VEC3, 'requested start [m]')
+    goal: Vec3 = field_spec(VEC3, 'requested goal [m]')
+    waypoints: int = field_spec(COUNT, 'poses in the published path')
+    length: float = field_spec(NONNEGATIVE, 'length of the published path [m]')
+    duration: float = field_spec(NONNEGATIVE, 'time the path is parameterized to take [s]')
+    planning_time: float = field_spec(NONNEGATIVE, 'wall time spent planning [s]')
+
+    def _check_invariants(self, path: str) -> None:
+        if (self.status == 'no_path') != bool(self.reason):
+            raise MessageError(
+                f'{path}.reason',
+                f"expected a reason exactly when status is 'no_path', got status "
+                f'{self.status!r} and reason {self.reason!r}',
+            )
+        if self.status == 'planned' and self.waypoints == 0:
+            raise MessageError(f'{path}.waypoints', "expected waypoints > 0 when 'planned'")
+        if self.status != 'planned' and (self.waypoints or self.length or self.duration):
+            raise MessageError(
+                f'{path}.waypoints', f'expected no path figures when {self.status!r}')
+
+
 @dataclass(frozen=True)
 class _ChamberPressureMap(Message, abstract=True):
     """Gauge pressure per chamber, shared by commanded and measured pressures."""
@@ -111,6 +150,68 @@ class ChamberPressures(_ChamberPressureMap):
     ``chambers`` is built from a mapping such as ``{'B1': 11950.0}`` and stored as (name, value)
     pairs sorted by name; ``as_dict()`` gives the mapping back.
     """
+
+
+@dataclass(frozen=True)
+class LinkPressures(Message):
+    """Measured gauge pressure per inflated link of the inflatable arm.
+
+    ``links`` is built from a mapping such as ``{'link_1': 50010.0}`` and stored as (name,
+    value) pairs sorted by name; ``as_dict()`` gives the mapping back.
+    """
+
+    links: tuple[tuple[str, float], ...] = field_spec(
+        Map(Number(minimum=VACUUM_GAUGE_PA)),
+        "gauge pressure by link name ('link_1', 'link_2'), at least one, not below vacuum [Pa]",
+    )
+
+    def as_dict(self) -> dict[str, float]:
+        """Return the pressures as a new ``{link name: gauge pressure [Pa]}`` dict."""
+        return dict(self.links)
+
+
+#: HardwareStatus.state: the lifecycle state of the bridge.
+BRIDGE_STATES = ('unconfigured', 'inactive', 'active', 'finalized')
+#: HardwareStatus.link: the serial link to the MCU.
+LINK_STATES = ('closed', 'handshake', 'connected', 'lost')
+#: HardwareStatus.motors: what the motors are told; 'none' when the MCU has none.
+MOTOR_OUTPUTS = ('none', 'follow', 'hold', 'zero_torque')
+#: HardwareStatus.valves: what the valves are told; 'none' when the MCU has none.
+VALVE_OUTPUTS = ('none', 'follow', 'safe')
+
+
+@dataclass(frozen=True)
+class HardwareStatus(Message):
+    """State of a hardware bridge: its outputs, the MCU link, faults and its reaction time."""
+
+    state: str = field_spec(Choice(BRIDGE_STATES), 'lifecycle state of the bridge')
+    link: str = field_spec(Choice(LINK_STATES), 'serial link to the MCU')
+    motors: str = field_spec(
+        Choice(MOTOR_OUTPUTS), "motor output: following commands, or a safe 'hold' or zero torque"
+    )
+    valves: str = field_spec(
+        Choice(VALVE_OUTPUTS), "valve output: following commands, or the configured 'safe' one"
+    )
+    faults: tuple[str, ...] = field_spec(Array(NAME), 'active faults, latched ones included')
+    latched: tuple[str, ...] = field_spec(
+        Array(NAME), 'faults that hold the safe output until reset (a subset of faults)'
+    )
+    reason: str = field_spec(
+        Text(allow_empty=True), 'why an output is safe; empty while both follow commands'
+    )
+    safe_latency: float | None = field_spec(
+        Nullable(NONNEGATIVE),
+        'last measured time from detecting a fault or timeout to the MCU confirming the safe '
+        'output, null if none yet [s]',
+    )
+    clamped: int = field_spec(COUNT, 'commands clamped to a limit since start')
+    rejected: int = field_spec(COUNT, 'commands rejected since start')
+    bad_frames: int = field_spec(COUNT, 'bad frames received from the MCU since start')
+
+    def _check_invariants(self, path: str) -> None:
+        extra = sorted(set(self.latched) - set(self.faults))
+        if extra:
+            raise MessageError(f'{path}.latched', f'expected a subset of faults, got {extra}')
 
 
 @dataclass(frozen=True)

@@ -5,29 +5,32 @@ small yellow ball on the soft arm's end. Pure numpy/OpenCV, no rclpy.
 
 Pipeline of `detect_ball` (one frame, whole image):
 
-1. **Candidates** on a decimated copy (every ``s``-th pixel, ``s`` chosen so that the smallest
-   ball keeps >= 2.5 px of radius): HSV thresholds (``cv2.inRange``), a morphological opening
-   that removes specks, external contours with their holes (``cv2.findContours``, two-level
-   hierarchy). A contour is a candidate if its area fits the radius range, its circularity
-   ``4 pi A / P^2`` and its fill (area without holes / area) are high enough.
-2. **Refinement** of each candidate at full resolution in a region around it
-   (`refine_in_region`, also the tracking step): the thresholded blob gives a first centre and
-   radius; rays cast from that centre sample the image (bilinear, ``cv2.remap``) across the
-   ball's edge, and on each ray the edge is where the signal crosses half-way between the
-   ray's own inside and outside levels (sub-pixel, by linear interpolation).
-   The signal is a colour channel **blind to the ball's colour** (orthogonal in BGR to the
-   ball's colour, measured on its unsaturated pixels): in it the ball is black however it is
-   shaded and the edge is the background being covered, so limb darkening and highlights do
-   not move it. When the background is itself dark in that channel (black, red, yellow
-   surroundings) the **chroma** channel (orthogonal to grey) is used instead.
-3. **Fit**: an ellipse (``cv2.fitEllipseDirect``) through the edge points, refitted twice
-   without the points farther from it than the tolerance (3 robust standard deviations,
-   capped at ``0.5 + 0.03 r`` px). ``confidence`` is the fraction of rays whose edge lies on
-   the final ellipse; a candidate is accepted if it is high enough and the ellipse is not too
-   elongated. The best accepted candidate wins.
+1. **Candidates** on a copy shrunk by ``s`` (`DetectorParams.decimation`: the smallest ball
+   keeps >= 2 px of radius): HSV thresholds (``cv2.inRange``), an opening that removes specks,
+   external contours with their holes (``cv2.findContours``, two-level hierarchy). A contour is
+   a candidate if its area fits the radius range, its circularity ``4 pi A / P^2`` and its
+   fill (area not in holes) are high enough, and it lies close to an ellipse that is not too
+   elongated (`_elliptic`).
+2. **Sub-pixel outline** (`_refine_at`), from the candidate's centroid and area: rays sample
+   the full-resolution image (bilinear, ``cv2.remap``) across the ball's edge, and on each ray
+   the edge is where the signal crosses half-way between the inside and outside levels
+   (`_edges`). The signal is a colour channel **blind to the ball's colour** (orthogonal in
+   BGR to the ball's colour, measured on its unclipped, unhighlighted pixels): in it the ball
+   reads 0 however it is shaded, and the edge is the background being covered, so limb
+   darkening and shadow do not move it. When the background is itself dark in that channel
+   (black, red, yellow surroundings) the **chroma** channel (orthogonal to grey) is used. The
+   edge points are moved out by the blur's shift of a curved edge, ``sigma^2 / (2 r)``.
+3. **Fit** (`_fit_outline`): an ellipse (``cv2.fitEllipseDirect``) through the edge points,
+   refitted without those farther from it than 3 robust standard deviations (at most
+   ``0.5 + 0.03 r`` px). ``confidence`` is the fraction of rays whose edge lies on the
+   ellipse; a candidate is accepted (`_accept`) if it is high enough, the ellipse not too
+   elongated and its radius in range. If the outline from the decimated candidate fails, its
+   blob is thresholded again at full resolution in a region around it (`refine_in_region`).
+   The accepted candidate of highest confidence wins.
 
-`BallTracker` runs step 2 in a region around the last detection (tracking mode) and falls back
-to `detect_ball` on the whole frame when the ball is lost there.
+`BallTracker` refines the outline at the position predicted from the last detections with
+their colour and blur (tracking mode), then tries the thresholded blobs around it, and falls
+back to `detect_ball` on the whole frame when the ball is lost.
 
 Pixel convention (OpenCV's): pixel ``i`` spans ``[i - 0.5, i + 0.5]``; ``center`` is the centre
 of the fitted ellipse, ``radius`` ``sqrt(a b)`` of its semi-axes (the radius of the disc of equal
@@ -52,7 +55,7 @@ __all__ = [
 ]
 
 
-def _check_triple(value, name: str, high: int) -> tuple[int, int, int]:
+def _check_hsv(value, name: str) -> tuple[int, int, int]:
     v = tuple(value)
     if len(v) != 3 or not all(isinstance(x, (int, np.integer)) and not isinstance(x, bool)
                               for x in v):
@@ -78,8 +81,8 @@ class DetectorParams:
     min_radius_px, max_radius_px : float
         Range of apparent radii [px].
     min_circularity : float
-        Smallest ``4 pi A / P^2`` of a candidate's thresholded contour (1 for a disc; a digital
-        disc of radius 3 px scores about 0.8, a square 0.785, a half disc 0.75).
+        Smallest ``4 pi A / P^2`` of a candidate's thresholded contour (1 for a disc, pi / 4
+        for a square, 0.75 for a half disc; a pixel contour scores less than its shape).
     min_fill : float
         Smallest fraction of a candidate's contour area that is not holes (rejects rings; a
         highlight the thresholds miss is a small hole).
@@ -111,8 +114,8 @@ class DetectorParams:
     max_candidates: int = 4
 
     def __post_init__(self) -> None:
-        lower = _check_triple(self.hsv_lower, 'hsv_lower', 255)
-        upper = _check_triple(self.hsv_upper, 'hsv_upper', 255)
+        lower = _check_hsv(self.hsv_lower, 'hsv_lower')
+        upper = _check_hsv(self.hsv_upper, 'hsv_upper')
         if any(lo > hi for lo, hi in zip(lower, upper, strict=True)):
             raise ValueError(f'expected hsv_lower <= hsv_upper, got {lower} and {upper}')
         object.__setattr__(self, 'hsv_lower', lower)
@@ -549,7 +552,7 @@ def refine_in_region(bgr_image: npt.ArrayLike, region: tuple[int, int, int, int]
         Expected centre [px]: blobs are tried in order of distance from it (default: best
         shape first).
     prior : BallDetection, optional
-        The ball's last detection: its colour and blur start the refinement (tracking).
+        The ball's last detection: its colour is used instead of measuring it (tracking).
     max_blobs : int, optional
         Number of blobs tried (default ``params.max_candidates``).
 
@@ -604,8 +607,8 @@ def detect_ball(bgr_image: npt.ArrayLike,
         The accepted candidate of highest confidence, or None if there is no yellow ball.
     """
     image = _check_image(bgr_image)
-    s = params.decimation
     h, w = image.shape[:2]
+    s = params.decimation if min(h, w) >= 8 * params.decimation else 1
     small = image if s == 1 else cv2.resize(image, (w // s, h // s),
                                             interpolation=cv2.INTER_AREA)
     mask = _threshold(small, params)

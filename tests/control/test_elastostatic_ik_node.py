@@ -12,7 +12,7 @@ from inflarm_control.nodes.elastostatic_ik import ElastostaticIk, resample
 from inflarm_model.elastostatics import spring_deflections
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import MEAN_STIFFNESS
-from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, RELIABLE_QOS
 from ros_harness import spin_until
 
 ARM = FlexibleArm(0.6, 0.03)
@@ -35,7 +35,9 @@ class Rig:
                                        self.commands.append, COMMAND_QOS)
         self.target_pub = self.probe.create_publisher(PointStamped, 'tip_target', COMMAND_QOS)
         self.path_pub = self.probe.create_publisher(Path, 'tip_trajectory', RELIABLE_QOS)
-        self.joint_pub = self.probe.create_publisher(JointState, 'joint_states', SENSOR_QOS)
+        self.joint_pub = self.probe.create_publisher(JointState, 'joint_states', JOINT_STATE_QOS)
+        self.pose_pub = self.probe.create_publisher(JointState, 'estimated_joint_states',
+                                                    JOINT_STATE_QOS)
         self.wrench_pub = self.probe.create_publisher(WrenchStamped, 'estimated_wrench',
                                                       RELIABLE_QOS)
         executor.add_node(self.node)
@@ -78,6 +80,7 @@ def test_the_estimated_load_is_used_once_there_is_one(executor):
     rig.idle()
     assert rig.commands == []  # no estimated_wrench yet: rejected
     wrench = WrenchStamped()
+    wrench.header.frame_id = 'base_link'
     wrench.wrench.force.y, wrench.wrench.force.z = 5.0, -5.0
     rig.wrench_pub.publish(wrench)
     assert spin_until(executor, lambda: rig.node.estimated_force is not None)
@@ -85,6 +88,28 @@ def test_the_estimated_load_is_used_once_there_is_one(executor):
     assert spin_until(executor, lambda: rig.commands)
     tip = deflected_tip(rig.commands[0].position, [0.0, 5.0, -5.0])
     np.testing.assert_allclose(tip, [0.8, 0.2, 0.1], atol=1e-7)
+
+
+def test_a_tip_frame_wrench_is_turned_into_the_base_frame_with_its_pose(executor):
+    rig = Rig(executor)
+    q = FlexibleArm.assemble_q(Q_M, [0.01, -0.02, 0.03, 0.01])
+    stamp = rig.node.get_clock().now().to_msg()
+    wrench = WrenchStamped()
+    wrench.header.frame_id, wrench.header.stamp = 'tip', stamp
+    force_tip = ARM.fk(q)[:3, :3].T @ FORCE
+    wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = force_tip.tolist()
+    rig.wrench_pub.publish(wrench)  # before its pose: kept until the pose comes
+    rig.idle(0.3)
+    assert rig.node.estimated_force is None
+    pose = JointState(name=list(FlexibleArm.JOINT_NAMES), position=q.tolist())
+    pose.header.stamp = stamp
+    rig.pose_pub.publish(pose)
+    assert spin_until(executor, lambda: rig.node.estimated_force is not None)
+    np.testing.assert_allclose(rig.node.estimated_force, FORCE, atol=1e-9)
+    wrench.header.frame_id = 'camera'
+    rig.wrench_pub.publish(wrench)
+    rig.idle(0.3)
+    assert "frame_id 'camera'" in rig.node.problems.last['estimated_wrench']
 
 
 def test_bad_targets_are_rejected_and_the_node_keeps_going(executor):
@@ -135,6 +160,24 @@ def test_a_trajectory_without_increasing_stamps_is_rejected(executor):
     rig.idle()
     assert rig.node.trajectory is None and rig.commands == []
 
+
+def test_a_path_out_of_reach_or_too_long_is_rejected_whole(executor):
+    rig = Rig(executor, **{'load.source': 'configured', 'max_duration_s': 60.0})
+    rig.joints()
+    first = deflected_tip(Q_M)
+    now = rig.node.get_clock().now()
+    # Through (5, 5, 5) m: far beyond 2L; the integrated motors would run away.
+    rig.path_pub.publish(path_msg([first, [5.0, 5.0, 5.0]], [0.0, 2.0], now))
+    rig.idle()
+    assert rig.commands == [] and rig.node.trajectory is None
+    assert 'tip strays' in rig.node.problems.last['tip_trajectory'] \
+        or 'outside its limits' in rig.node.problems.last['tip_trajectory']
+    # Two poses 1e4 s apart: bounded before anything is resampled or integrated.
+    rig.path_pub.publish(path_msg([first, first + 0.01], [0.0, 1e4], now))
+    rig.idle()
+    assert rig.commands == []
+    assert 'over max_duration_s' in rig.node.problems.last['tip_trajectory']
+    assert rig.node.problems.unexpected == 0
 
 def test_resample_keeps_the_waypoints_and_bounds_the_step():
     times = np.array([0.0, 1.0, 1.5])

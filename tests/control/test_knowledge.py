@@ -314,7 +314,8 @@ AROUND = KnowledgeGrid(origin=(0.10, 0.09, 0.72), spacing=0.01, shape=(3, 3, 3))
 @pytest.fixture(scope='module')
 def built(tmp_path_factory):
     path = tmp_path_factory.mktemp('kdb') / 'around.db'
-    db = build_knowledge_database(path, AROUND, batch_size=10, workers=1, progress=False)
+    db = build_knowledge_database(path, AROUND, plant_factory=SoftArmPlant, batch_size=10,
+                                  workers=1, progress=False)
     yield db
     db.close()
 
@@ -359,7 +360,8 @@ def test_build_resumes_only_the_missing_points(tmp_path, built):
     with KnowledgeDatabase.create(path, AROUND) as db:
         db.write([0, 26], np.full((2, 50, 5), 150.0))
     db = build_knowledge_database(
-        path, AROUND, n_trials=30, batch_size=13, workers=1, progress=False
+        path, AROUND, plant_factory=SoftArmPlant, n_trials=30, batch_size=13, workers=1,
+        progress=False
     )
     assert db.n_filled == 27
     np.testing.assert_allclose(db.read([0, 26]), 150.0)
@@ -368,19 +370,23 @@ def test_build_resumes_only_the_missing_points(tmp_path, built):
 
 def test_build_in_two_processes_matches_one(tmp_path, built):
     db = build_knowledge_database(
-        tmp_path / 'k.db', AROUND, batch_size=14, workers=2, progress=False
+        tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant, batch_size=14, workers=2,
+        progress=False
     )
     np.testing.assert_allclose(db.read(np.arange(27)), built.read(np.arange(27)))
 
 
 def test_build_validates_its_arguments(tmp_path):
     with pytest.raises(ValueError, match='n_trials to be an int >= 1'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, n_trials=0)
+        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant,
+                                 n_trials=0)
     with pytest.raises(ValueError, match=r'scale >= 1\.526 Pa per LSB'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, scale=1.0)
+        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant,
+                                 scale=1.0)
     KnowledgeDatabase.create(tmp_path / 'k.db', AROUND, steps=10).close()
     with pytest.raises(ValueError, match='to resume'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, progress=False)
+        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant,
+                                 progress=False)
 
 
 def test_seed_memory_is_the_nearest_points_memory(built):

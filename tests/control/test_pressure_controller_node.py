@@ -210,3 +210,23 @@ def test_a_path_outside_the_workspace_is_rejected(executor):
     path_pub.publish(path)
     rig.spin(0.5)
     assert not rig.controller.trial_active and rig.commands == []
+
+
+def test_an_absurd_ball_position_reaches_neither_the_report_nor_the_memory(executor, tmp_path):
+    memory_file = tmp_path / 'ilc.npz'
+    rig = Rig(executor, trial_duration_s=1.0, ilc_memory_path=str(memory_file))
+    rig.ball(START)
+    assert spin_until(executor, lambda: rig.controller.position is not None)
+    rig.task(TARGET, mode='pid_ilc', trial_id=0)
+
+    def camera_glitches():
+        rig.ball((1e300, 0.0, 0.604))  # finite, absurd: rejected as a measurement
+        rig.ball(START)
+        return bool(rig.reports)
+    assert spin_until(executor, camera_glitches, timeout_s=10.0)
+    np.testing.assert_allclose(rig.reports[0].rmse, np.abs(np.subtract(START, TARGET)),
+                               rtol=1e-9)
+    assert 'above the workspace maximum' in rig.controller.problems.last['ball_position']
+    with np.load(memory_file) as data:
+        assert np.isfinite(data['memories']).all()
+        assert data['memories'].max() <= 100e3

@@ -1,4 +1,7 @@
-"""load_estimator in-process: estimates from joint_states, skips bad samples, guards wrinkling."""
+"""load_estimator in-process: estimates from joint_states, skips bad samples, guards wrinkling.
+
+Efforts are the torques the motors apply (ros2_control), the negative of the paper's tau_m.
+"""
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PointStamped, WrenchStamped
@@ -13,7 +16,7 @@ from inflarm_model.elastostatics import motor_torques, spring_deflections
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import MEAN_STIFFNESS, wrinkling_moment
 from inflarm_msgs_json import LinkStatus, decode
-from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS
+from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS
 from ros_harness import spin_until
 
 ARM = FlexibleArm(0.6, 0.03)
@@ -33,21 +36,27 @@ class Rig:
         self.node = LoadEstimator(context=executor.context, parameter_overrides=[
             Parameter(k, value=v) for k, v in overrides.items()])
         self.probe = rclpy.create_node('probe', context=executor.context)
-        self.out = {'wrench': [], 'springs': [], 'tip': [], 'links': [], 'diagnostics': []}
+        self.out = {'wrench': [], 'springs': [], 'tip': [], 'links': [], 'diagnostics': [],
+                    'pose': []}
         for topic, kind, key in (('estimated_wrench', WrenchStamped, 'wrench'),
+                                 ('estimated_joint_states', JointState, 'pose'),
                                  ('spring_deflections', JointState, 'springs'),
                                  ('estimated_tip', PointStamped, 'tip'),
                                  ('link_status', String, 'links'),
                                  ('diagnostics', DiagnosticArray, 'diagnostics')):
             self.probe.create_subscription(kind, topic, self.out[key].append, RELIABLE_QOS)
-        self.pub = self.probe.create_publisher(JointState, 'joint_states', SENSOR_QOS)
+        self.pub = self.probe.create_publisher(JointState, 'joint_states', JOINT_STATE_QOS)
         executor.add_node(self.node)
         executor.add_node(self.probe)
         assert spin_until(executor, lambda: self.pub.get_subscription_count() == 1)
 
-    def send(self, names, positions, efforts) -> None:
+    def send(self, names, positions, load_torques) -> None:
+        """A joint state whose motors hold ``load_torques`` (tau_m): they apply -tau_m."""
         self.pub.publish(JointState(name=names, position=list(positions),
-                                    effort=list(efforts)))
+                                    effort=[-float(t) for t in load_torques]))
+
+    def idle(self, seconds: float = 0.5) -> None:
+        spin_until(self.executor, lambda: False, timeout_s=seconds)
 
 
 def test_a_sample_yields_load_deflections_tip_and_link_status(executor):
@@ -57,13 +66,24 @@ def test_a_sample_yields_load_deflections_tip_and_link_status(executor):
     # extra joints and any order are fine
     rig.send(['gripper', 'joint_3', 'joint_1', 'joint_2'], [0.0, q_m[2], q_m[0], q_m[1]],
              [0.0, tau_m[2], tau_m[0], tau_m[1]])
-    assert spin_until(executor, lambda: len(rig.out['links']) == 2 and rig.out['tip'])
-    force = rig.out['wrench'][0].wrench.force
-    np.testing.assert_allclose([force.x, force.y, force.z], FORCE, atol=1e-6)
+    assert spin_until(executor, lambda: len(rig.out['links']) == 2 and rig.out['tip']
+                      and rig.out['diagnostics'])
+    # The wrench is stamped at the tip, in its frame: turned back to the base it is the load.
+    wrench = rig.out['wrench'][0]
+    assert wrench.header.frame_id == 'tip'
+    pose = ARM.fk(FlexibleArm.assemble_q(q_m, q_k))
+    f = wrench.wrench.force
+    np.testing.assert_allclose(pose[:3, :3] @ [f.x, f.y, f.z], FORCE, atol=1e-6)
+    torque = wrench.wrench.torque
+    assert [torque.x, torque.y, torque.z] == [0.0, 0.0, 0.0]  # a pure force at the tip
     np.testing.assert_allclose(rig.out['springs'][0].position, q_k, atol=1e-9)
     tip = rig.out['tip'][0].point
-    expected_tip = ARM.fk(FlexibleArm.assemble_q(q_m, q_k))[:3, 3]
-    np.testing.assert_allclose([tip.x, tip.y, tip.z], expected_tip, atol=1e-9)
+    np.testing.assert_allclose([tip.x, tip.y, tip.z], pose[:3, 3], atol=1e-9)
+    # The whole deflected pose, every URDF joint, for robot_state_publisher.
+    estimated = rig.out['pose'][0]
+    assert list(estimated.name) == list(FlexibleArm.JOINT_NAMES)
+    np.testing.assert_allclose(estimated.position, FlexibleArm.assemble_q(q_m, q_k),
+                               atol=1e-9)
     statuses = [decode(m.data, expected=LinkStatus) for m in rig.out['links']]
     assert [s.link for s in statuses] == ['link_1', 'link_2']
     assert statuses[0].wrinkling_moment == wrinkling_moment(50e3, 0.055)
@@ -79,18 +99,39 @@ def test_bad_samples_are_skipped_and_the_node_keeps_going(executor):
     rig.send(names[:2], q_m[:2], tau_m[:2])  # a motor missing
     rig.send(names, q_m, [])  # no efforts
     rig.send(names, [np.nan, 0.5, -1.1], tau_m)  # NaN
-    spin_until(executor, lambda: False, timeout_s=0.5)
-    assert rig.out['wrench'] == [] and rig.out['diagnostics'] == []
+    rig.send(names, [10.0, 0.5, -1.1], tau_m)  # beyond the joint limits, though finite
+    rig.send(names, [0.2, 1e10, -1.1], tau_m)
+    rig.idle()
+    assert rig.out['wrench'] == [] and rig.out['pose'] == []
+    assert 'joint_2 at 1e+10 rad is outside its limits' in rig.node.problems.last['joint_states']
+    assert rig.node.problems.counts['joint_states'] == 5
+    assert rig.node.problems.unexpected == 0
     rig.send(names, q_m, tau_m)
     assert spin_until(executor, lambda: rig.out['wrench'])
+
+
+def test_diagnostics_aggregate_about_once_a_second(executor):
+    rig = Rig(executor)
+    q_m = np.array([0.2, 0.5, -1.1])
+    _, tau_m = loaded_sample(q_m)
+    for i in range(30):
+        rig.send(['joint_1', 'joint_2', 'joint_3'], q_m, tau_m)
+        assert spin_until(executor, lambda: len(rig.out['wrench']) == i + 1)  # noqa: B023
+    assert spin_until(executor, lambda: rig.out['diagnostics'], timeout_s=3.0)
+    values = {kv.key: kv.value for d in rig.out['diagnostics'] for kv in d.status[0].values}
+    assert len(rig.out['diagnostics']) <= 3  # not one per sample
+    samples = sum(int(kv.value) for d in rig.out['diagnostics'] for kv in d.status[0].values
+                  if kv.key == 'samples')
+    assert samples == 30 and 'converged' in values
 
 
 def test_a_singular_configuration_is_reported_not_estimated(executor):
     rig = Rig(executor)
     # joint_2 = pi/2 with joint_3 = 0: the arm stands along joint 1's axis, J_m loses rank
     rig.send(['joint_1', 'joint_2', 'joint_3'], [0.0, np.pi / 2, 0.0], [0.1, 0.2, 0.3])
-    assert spin_until(executor, lambda: rig.out['diagnostics'])
-    status = rig.out['diagnostics'][0].status[0]
+    assert spin_until(executor, lambda: rig.out['diagnostics']
+                      and rig.out['diagnostics'][-1].status[0].level != DiagnosticStatus.WARN)
+    status = rig.out['diagnostics'][-1].status[0]
     assert status.level == DiagnosticStatus.ERROR
     assert status.message  # the reason
     spin_until(executor, lambda: False, timeout_s=0.3)

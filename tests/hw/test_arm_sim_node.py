@@ -1,4 +1,5 @@
-"""arm_sim in-process: joint states carry the load torques; commands and runtime load changes."""
+"""arm_sim in-process: joint states carry the motor torques; commands, limits, the command
+watchdog and runtime load changes."""
 
 import numpy as np
 import pytest
@@ -23,7 +24,8 @@ class Probe:
         self.node = rclpy.create_node('probe', context=executor.context)
         self.joints: list[JointState] = []
         self.springs: list[JointState] = []
-        self.node.create_subscription(JointState, 'joint_states', self.joints.append, SENSOR_QOS)
+        # A default subscription (reliable, depth 10), as robot_state_publisher makes.
+        self.node.create_subscription(JointState, 'joint_states', self.joints.append, 10)
         self.node.create_subscription(JointState, 'spring_states_truth', self.springs.append,
                                       SENSOR_QOS)
         self.command_pub = self.node.create_publisher(
@@ -38,14 +40,14 @@ class Probe:
         return self.joints[-1]
 
 
-def test_effort_is_the_load_torque_of_the_deflected_arm(executor):
+def test_effort_is_the_torque_the_motors_apply_to_hold_the_load(executor):
     probe = Probe(executor)
     msg = probe.wait_new()
     assert list(msg.name) == ['joint_1', 'joint_2', 'joint_3']
     spring = probe.springs[-1]
     q = FlexibleArm.assemble_q(msg.position, spring.position)
-    expected = motor_torques(FlexibleArm(0.6, 0.03), q, [0.0, 10.0, -15.0])
-    np.testing.assert_allclose(msg.effort, expected, atol=1e-6)
+    load_torques = motor_torques(FlexibleArm(0.6, 0.03), q, [0.0, 10.0, -15.0])  # eq. 6
+    np.testing.assert_allclose(msg.effort, -load_torques, atol=1e-6)
     assert np.abs(spring.position).max() > 1e-3  # the default load bends the links
 
 
@@ -56,10 +58,30 @@ def test_commands_move_the_motors_and_bad_ones_are_rejected(executor):
     probe.wait_new(5)
     np.testing.assert_allclose(probe.sim.sim.target, [0.0, 0.6, -1.2])
 
+    # Finite but beyond the joint limits: rejected whole, the other joint does not move either.
+    probe.command_pub.publish(JointState(name=['joint_1', 'joint_2'], position=[100.0, 0.5]))
+    probe.wait_new(5)
+    np.testing.assert_allclose(probe.sim.sim.target, [0.0, 0.6, -1.2])
+    assert 'joint_1 at 100 rad is outside its limits' in \
+        probe.sim.problems.last['motor_position_command']
+
     probe.command_pub.publish(JointState(name=['joint_1', 'joint_3'], position=[0.2, -1.0]))
     assert spin_until(executor, lambda: abs(probe.joints[-1].position[0] - 0.2) < 1e-4,
                       timeout_s=10.0)
     np.testing.assert_allclose(probe.joints[-1].position, [0.2, 0.6, -1.0], atol=1e-4)
+    assert probe.sim.problems.unexpected == 0
+
+
+def test_without_commands_the_motors_hold_where_they_are(executor):
+    probe = Probe(executor, cmd_timeout_s=0.3, **{'motor.max_velocity_rad_s': 0.2})
+    probe.command_pub.publish(JointState(name=['joint_1'], position=[1.0]))
+    assert spin_until(executor, lambda: probe.joints[-1].position[0] > 0.02)
+    # The controller falls silent: after cmd_timeout_s the motor stops short of 1 rad.
+    assert spin_until(executor, lambda: probe.sim.last_command_time is None, timeout_s=5.0)
+    held = probe.sim.sim.target[0]
+    assert 0.02 < held < 0.5
+    probe.wait_new(10)
+    assert abs(probe.joints[-1].position[0] - held) < 1e-3
 
 
 def test_the_tip_load_changes_at_runtime_and_bad_loads_are_rejected(executor):

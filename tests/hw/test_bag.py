@@ -4,7 +4,7 @@ And inflarm-estimate-bag on bags of known loads."""
 import numpy as np
 import pytest
 
-from inflarm_estimation.bag_estimate import main as estimate_bag
+from inflarm_bringup.bag_estimate import main as estimate_bag
 from inflarm_hw.bag import (
     BagWriter,
     TopicQos,
@@ -182,7 +182,7 @@ def write_loaded_arm_bag(path, force: np.ndarray, n: int = 8):
                     stamp=types['builtin_interfaces/msg/Time'](sec=100 + i, nanosec=0),
                     frame_id='base_link'),
                 name=[f'joint_{j + 1}' for j in order], position=q_m[order],
-                velocity=np.zeros(0), effort=tau_m[order])
+                velocity=np.zeros(0), effort=-tau_m[order])  # the motors apply -tau_m
             bag.write('joint_states', T0 + i, serialize(msg, JOINT_STATE))
             equilibria.append(eq)
         bag.write('report', T0, serialize(string('not a joint state'), STRING))

@@ -8,8 +8,11 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+import yaml
 
 from inflarm_hw.bag import (
     BagWriter,
@@ -44,6 +47,32 @@ def joint_state_msg(i: int) -> JointState:
 
 
 # --- bag_recorder -----------------------------------------------------------------------------
+
+
+def test_recorder_records_a_latched_topic_published_before_it_started(executor, tmp_path):
+    # robot_description is latched and published once, long before any recorder exists.
+    source = rclpy.create_node('source', context=executor.context)
+    description_pub = source.create_publisher(String, 'robot_description', LATCHED_QOS)
+    description_pub.publish(String(data='<robot name="arm"/>'))
+    executor.add_node(source)
+    executor.spin_once(timeout_sec=0.1)
+    bag = tmp_path / 'latched'
+    recorder = BagRecorder(context=executor.context, parameter_overrides=overrides(
+        topics=['robot_description'], output=str(bag)))
+    executor.add_node(recorder)
+    assert spin_until(executor, lambda: recorder.bag.counts.get('/robot_description') == 1), \
+        recorder.bag.counts
+    executor.remove_node(recorder)
+    recorder.destroy_node()
+    info = bag_info(bag)
+    assert info.topics['/robot_description'].offered_qos[0].durability == 'transient_local'
+    [message] = read_messages(bag)
+    assert deserialize(message.data, message.msgtype).data == '<robot name="arm"/>'
+    # Jazzy's rosbag2 metadata: version 9, a type description hash per topic.
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert metadata['version'] == 9
+    topic = metadata['topics_with_message_count'][0]['topic_metadata']
+    assert topic['type_description_hash'].startswith('RIHS01_')
 
 
 def test_recorder_records_a_sensor_and_a_reliable_topic_and_the_bag_reads_back_equal(
@@ -221,6 +250,22 @@ def test_player_loops_and_replays_latched_topics_latched(executor, tmp_path):
     listener.node.create_subscription(String, 'robot_description',
                                       lambda m: received.append(m.data), LATCHED_QOS)
     assert spin_until(executor, lambda: received == ['<robot/>'], timeout_s=5.0), received
+
+
+def test_player_publishes_the_bag_time_on_clock(executor, tmp_path):
+    write_bag(tmp_path / 'bag', n_joints=20, joint_period_ns=50_000_000)  # 1 s of bag time
+    listener = Listener(executor)
+    clock = []
+    listener.node.create_subscription(Clock, '/clock', clock.append, 10)
+    player = BagPlayer(context=executor.context, parameter_overrides=overrides(
+        input=str(tmp_path / 'bag'), start_delay_s=0.2, clock_rate_hz=50.0))
+    executor.add_node(player)
+    end = player.info.start_ns + player.info.duration_ns
+    assert spin_until(executor, lambda: player.done, timeout_s=10.0)
+    assert spin_until(executor, lambda: Time.from_msg(clock[-1].clock).nanoseconds == end)
+    times = [Time.from_msg(m.clock).nanoseconds for m in clock]
+    assert len(times) > 10 and times == sorted(times)  # never backwards within a pass
+    assert times[0] >= player.info.start_ns
 
 
 def test_player_errors_name_the_problem(ros_context, tmp_path):

@@ -96,3 +96,17 @@ def test_bad_input_is_rejected_and_the_state_kept(call, match):
     np.testing.assert_array_equal(sim.target, Q_M0)
     np.testing.assert_array_equal(sim.force, 0.0)
     assert sim.time == before.time
+
+
+def test_targets_are_clamped_to_the_urdf_motor_limits():
+    from inflarm_model.urdf import JOINT_LIMITS
+
+    limits = [JOINT_LIMITS[name] for name in FlexibleArm.MOTOR_JOINT_NAMES]
+    sim = make_sim(motor_time_constant=0.01, motor_max_velocity=10.0)
+    sim.command([4.0, -2.0, 3.0])
+    np.testing.assert_array_equal(sim.target, [limits[0][1], limits[1][0], limits[2][1]])
+    for _ in range(200):
+        state = sim.step(0.01)
+    np.testing.assert_allclose(state.q_m, sim.target, atol=1e-9)
+    with pytest.raises(ValueError, match='within the motor limits'):
+        InflatableArmSim(ARM, MEAN_STIFFNESS, [50e3, 50e3], 0.055, [0.0, 2.0, 0.0])

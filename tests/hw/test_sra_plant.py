@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+from inflarm_hw.valve import ITV2050, pressure_to_voltage
 from inflarm_model.soft_arm import CHAMBERS, quadrant_of
 
 PEA, B1, B2, B3, B4 = (CHAMBERS.index(c) for c in CHAMBERS)
@@ -33,22 +34,32 @@ def test_rest_is_straight_at_the_fig7_start():
     np.testing.assert_allclose(plant.end_point, np.tile([0.0, 0.0, 0.604], (3, 1)), atol=1e-12)
 
 
-def test_valve_follows_eq2():
+def test_the_plant_valves_are_eq2_of_inflarm_hw_valve():
     plant = SoftArmPlant()
-    p = plant.params
-    pressures = np.array([4e3, 20e3, 450e3, 900e3])
-    voltage = plant.valve_voltage(pressures)
-    gain = (p.valve_pressure_max - p.valve_pressure_min) / (
-        p.valve_voltage_max - p.valve_voltage_min)
-    np.testing.assert_allclose(voltage, pressures / gain)
-    np.testing.assert_allclose(plant.valve_pressure(voltage), pressures)
-    np.testing.assert_allclose(plant.valve_pressure(p.valve_voltage_max), p.valve_pressure_max)
+    valve = plant.params.valve
+    assert valve == ITV2050
+    pressures = np.array([4e3, 20e3, 450e3, 895e3])
+    np.testing.assert_allclose(plant.valve_voltage(pressures), pressure_to_voltage(pressures))
+    np.testing.assert_allclose(plant.valve_pressure(plant.valve_voltage(pressures)), pressures)
+    np.testing.assert_allclose(plant.valve_pressure(valve.voltage_max), valve.full_scale)
 
 
 def test_valve_dead_zone_and_range():
     plant = SoftArmPlant()
     v = plant.valve_voltage([3.9e3, 2e6, -5e3])
-    np.testing.assert_allclose(plant.valve_pressure(v), [0.0, 900e3, 0.0])
+    np.testing.assert_allclose(plant.valve_pressure(v), [0.0, 895e3, 0.0])
+
+
+def test_stepping_with_voltages_equals_stepping_with_their_set_pressures():
+    by_pressure, by_voltage = SoftArmPlant(), SoftArmPlant()
+    command = _command(PEA=20, B3=30, B4=3.9)
+    for _ in range(10):
+        by_pressure.step(command, 0.1)
+        by_voltage.step_valve_voltages(pressure_to_voltage(command), 0.1)
+    np.testing.assert_array_equal(by_voltage.chamber_pressures, by_pressure.chamber_pressures)
+    assert by_pressure.chamber_pressures[0, B4] == 0.0  # dead zone
+    with pytest.raises(ValueError, match='finite voltages'):
+        by_voltage.step_valve_voltages(np.full(5, np.nan), 0.1)
 
 
 def test_commands_in_the_dead_zone_leave_the_arm_at_rest():
@@ -82,7 +93,7 @@ def test_holding_pressures_below_the_dead_zone_cannot_be_held():
     plant = SoftArmPlant()
     point = [0.004, 0.10, 0.75]  # needs ~3 kPa in B4
     pressures = plant.holding_pressures(point)
-    assert 0.0 < pressures[0, B4] < plant.params.valve_dead_zone
+    assert 0.0 < pressures[0, B4] < plant.params.valve.dead_zone
     plant.reset(end_point=point)
     _hold(plant, pressures, 10.0)
     assert plant.chamber_pressures[0, B4] < 1.0
@@ -216,7 +227,7 @@ def test_measurement_noise_has_the_configured_spread():
     (lambda p: p.holding_pressures([0.2, 0.0, 0.6]), 'bend beyond'),
     (lambda p: p.holding_pressures([0.0, 0.0]), r'end_point of shape \(3,\)'),
     (lambda p: p.static_end_point([-1.0, 0, 0, 0, 0]), 'non-negative pressures'),
-    (lambda p: p.valve_voltage([np.inf]), 'finite pressure'),
+    (lambda p: p.valve_voltage([np.inf]), r'finite p \[Pa\]'),
 ])
 def test_bad_input_is_rejected(call, message):
     with pytest.raises(ValueError, match=message):

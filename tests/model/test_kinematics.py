@@ -371,10 +371,12 @@ def test_urdf_structure_and_visuals():
     assert links[0] == 'base_link' and links[-1] == 'tip'
     joints = {j.get('name'): j.get('type') for j in root.iter('joint')}
     assert joints == {**dict.fromkeys(FlexibleArm.JOINT_NAMES, 'revolute'), 'tip_joint': 'fixed'}
-    cylinders = list(root.iter('cylinder'))
+    cylinders = [v.find('geometry/cylinder') for v in root.iter('visual')]
     assert {c.get('radius') for c in cylinders} == {'0.07'}
-    # The visuals cover both inflatable links end to end.
+    # The visuals cover both inflatable links end to end, and so do the collisions.
     np.testing.assert_allclose(sum(float(c.get('length')) for c in cylinders), 2 * L)
+    collisions = [c.find('geometry/cylinder') for c in root.iter('collision')]
+    assert [c.attrib for c in collisions] == [c.attrib for c in cylinders]
 
 
 def test_spring_stiffness_round_trip():
@@ -564,3 +566,68 @@ def test_core_imports_without_rclpy():
     )
     env = {**os.environ, 'PYTHONPATH': os.pathsep.join(p for p in sys.path if p)}
     subprocess.run([sys.executable, '-c', code], check=True, timeout=60, env=env)
+
+
+# --- the installed URDF: tip, limits, masses ---------------------------------------------------
+
+
+def test_installed_urdf_is_the_generated_one():
+    from pathlib import Path
+
+    from ament_index_python.packages import get_package_share_directory
+
+    from inflarm_model.urdf import URDF_FILENAME
+
+    checked_in = Path(__file__).parents[2] / 'inflarm_model' / 'urdf' / URDF_FILENAME
+    regenerate = 'python -m inflarm_model.urdf inflarm_model/urdf'
+    assert checked_in.read_text(encoding='utf-8') == flexible_arm_urdf(), regenerate
+    installed = Path(get_package_share_directory('inflarm_model')) / 'urdf' / URDF_FILENAME
+    assert installed.read_text(encoding='utf-8') == flexible_arm_urdf(), 'scripts/setup.sh'
+
+
+def test_urdf_limits_are_the_one_table():
+    from inflarm_model.elastostatics import SPRING_DEFLECTION_LIMIT
+    from inflarm_model.urdf import JOINT_LIMITS, MOTOR_MAX_EFFORT, MOTOR_MAX_VELOCITY
+
+    root = ET.fromstring(flexible_arm_urdf())
+    for joint in root.iter('joint'):
+        if joint.get('type') != 'revolute':
+            continue
+        name, limit = joint.get('name'), joint.find('limit')
+        assert (float(limit.get('lower')), float(limit.get('upper'))) == JOINT_LIMITS[name]
+        if name in FlexibleArm.MOTOR_JOINT_NAMES:  # the simulated motors' rate limit
+            assert float(limit.get('velocity')) == MOTOR_MAX_VELOCITY
+            assert float(limit.get('effort')) == MOTOR_MAX_EFFORT
+    for name in FlexibleArm.SPRING_JOINT_NAMES:  # the model range of the estimator
+        assert JOINT_LIMITS[name] == (-SPRING_DEFLECTION_LIMIT, SPRING_DEFLECTION_LIMIT)
+    # The tip link sits at DH frame 7, the end effector of eq. (4).
+    model = pin.buildModelFromXML(flexible_arm_urdf())
+    data = model.createData()
+    q = random_q(np.random.default_rng(7), 7)
+    pin.framesForwardKinematics(model, data, q)
+    tip = model.getFrameId('tip', pin.BODY)
+    np.testing.assert_allclose(data.oMf[tip].homogeneous,
+                               dh_fk_reference(flexible_dh_table(), q), atol=TOL)
+    np.testing.assert_allclose(model.lowerPositionLimit,
+                               [JOINT_LIMITS[n][0] for n in FlexibleArm.JOINT_NAMES])
+
+
+def test_urdf_masses_follow_the_stated_assumptions():
+    from inflarm_model.urdf import CAP_MASS, FABRIC_DENSITY, segment_inertia
+
+    model = pin.buildModelFromXML(flexible_arm_urdf())
+    tube = 2 * math.pi * 0.055 * 0.5e-3 * L * FABRIC_DENSITY  # a whole link's fabric
+    masses = {name: inertia.mass for name, inertia in zip(model.names, model.inertias,
+                                                           strict=True)}
+    link1 = masses['joint_2'] + masses['spring_2']  # bodies l1 and l2 of link 1
+    link2 = masses['joint_3'] + masses['spring_4']
+    assert link1 == pytest.approx(tube + 2 * CAP_MASS) == pytest.approx(link2)
+    assert link1 == pytest.approx(0.295, abs=0.001)
+    # A thin tube with no caps: the textbook inertias of a cylindrical shell.
+    mass, center, axial, transverse = segment_inertia(0.6, 0.055, 0.5e-3, (0, 0))
+    assert center == pytest.approx(0.3)
+    assert axial == pytest.approx(mass * 0.055**2)
+    assert transverse == pytest.approx(mass * (0.055**2 / 2 + 0.6**2 / 12))
+    # The centre of mass of link 1's long body is past its middle: the distal cap.
+    inertial = model.inertias[model.getJointId('spring_2')]
+    assert inertial.lever[0] > L2 / 2

@@ -9,8 +9,11 @@ from inflarm_msgs_json import (
     ChamberPressures,
     ControlTask,
     Cuboid,
+    HardwareStatus,
+    LinkPressures,
     LinkStatus,
     ObstacleSet,
+    PlanOutcome,
     PlanRequest,
     PressureCommand,
     TrialReport,
@@ -29,11 +32,18 @@ EXAMPLES = {
         ),
     ),
     'PlanRequest': PlanRequest('base_link', (0.0, 0.0, 0.35), (0.2, -0.1, 0.3), 0.01),
+    'PlanOutcome': PlanOutcome(
+        'no_path', 'start_blocked', 'start is inside an alert region', (0.0, 0.13, 0.71),
+        (0.13, 0.0, 0.73), 0, 0.0, 0.0, 0.0125),
     'PressureCommand': PressureCommand({'B1': 12000.0, 'B2': -5000.0, 'A': 0.0}),
     'ChamberPressures': ChamberPressures({'B1': 11950.5, 'B2': -101325.0}),
     'ControlTask': ControlTask('base_link', (0.1, 0.2, 0.3), 'pid_ilc', 4),
     'TrialReport': TrialReport(3, (0.004, 0.0, 0.012), (1.25, None, 0.0)),
     'LinkStatus': LinkStatus('link_1', 35000.0, 2.5, 0.75, 1.75),
+    'LinkPressures': LinkPressures({'link_1': 50010.5, 'link_2': 49990.0}),
+    'HardwareStatus': HardwareStatus(
+        'active', 'connected', 'hold', 'safe', ('over_pressure', 'link_lost'),
+        ('over_pressure',), 'over_pressure: B1 at 131000 Pa', 0.023, 2, 1, 0),
 }
 
 finite = st.floats(allow_nan=False, allow_infinity=False) | st.integers(-(10**6), 10**6)
@@ -61,6 +71,14 @@ STRATEGIES = {
         ObstacleSet, names, nonnegative, st.lists(cuboids(), max_size=4).map(tuple)
     ),
     'PlanRequest': st.builds(PlanRequest, names, vec3, vec3, positive),
+    'PlanOutcome': st.one_of(
+        st.builds(PlanOutcome, st.just('planned'), st.just(''), st.text(max_size=8), vec3, vec3,
+                  st.integers(1, 10**4), nonnegative, nonnegative, nonnegative),
+        st.builds(PlanOutcome, st.just('no_path'), names, st.text(max_size=8), vec3, vec3,
+                  st.just(0), st.just(0.0), st.just(0.0), nonnegative),
+        st.builds(PlanOutcome, st.just('rejected'), st.just(''), st.text(max_size=8), vec3,
+                  vec3, st.just(0), st.just(0.0), st.just(0.0), nonnegative),
+    ),
     'PressureCommand': st.builds(PressureCommand, gauge_pressures),
     'ChamberPressures': st.builds(ChamberPressures, gauge_pressures),
     'ControlTask': st.builds(ControlTask, names, vec3, modes, counts),
@@ -71,6 +89,20 @@ STRATEGIES = {
         st.tuples(*[st.none() | nonnegative] * 3),
     ),
     'LinkStatus': st.builds(LinkStatus.from_moments, names, positive, nonnegative, nonnegative),
+    'LinkPressures': st.builds(LinkPressures, gauge_pressures),
+    'HardwareStatus': st.lists(names, max_size=4, unique=True).flatmap(
+        lambda faults: st.builds(
+            HardwareStatus,
+            st.sampled_from(['unconfigured', 'inactive', 'active', 'finalized']),
+            st.sampled_from(['closed', 'handshake', 'connected', 'lost']),
+            st.sampled_from(['none', 'follow', 'hold', 'zero_torque']),
+            st.sampled_from(['none', 'follow', 'safe']),
+            st.just(tuple(faults)),
+            st.lists(st.sampled_from(faults), unique=True).map(tuple) if faults
+            else st.just(()),
+            st.text(max_size=20),
+            st.none() | nonnegative,
+            counts, counts, counts)),
 }
 
 messages = st.one_of(*STRATEGIES.values())
@@ -90,7 +122,7 @@ scalars = (
     | st.floats()  # includes nan, inf and -0.0
     | st.sampled_from([1e308, -1e308, 5e-324, -101325.0, -101325.5, 0.0])
     | st.text(max_size=8)
-    | st.sampled_from([*sorted(MESSAGE_TYPES), 'pid', 'pid_ilc', 'Cuboid'])
+    | st.sampled_from([*sorted(MESSAGE_TYPES), 'pid', 'pid_ilc', 'Cuboid', 'planned', 'no_path'])
 )
 json_values = st.recursive(
     scalars,

@@ -22,6 +22,7 @@ from inflarm_msgs_json import (
     LinkStatus,
     MessageError,
     ObstacleSet,
+    PlanOutcome,
     PlanRequest,
     PressureCommand,
     TrialReport,
@@ -35,8 +36,8 @@ from msgs_json_cases import EXAMPLES
 
 def test_examples_cover_every_message_type():
     assert set(EXAMPLES) == set(MESSAGE_TYPES) == {
-        'ObstacleSet', 'PlanRequest', 'PressureCommand', 'ChamberPressures', 'ControlTask',
-        'TrialReport', 'LinkStatus',
+        'ObstacleSet', 'PlanRequest', 'PlanOutcome', 'PressureCommand', 'ChamberPressures',
+        'ControlTask', 'TrialReport', 'LinkStatus', 'LinkPressures', 'HardwareStatus',
     }  # fmt: skip
 
 
@@ -155,6 +156,12 @@ def test_replace_validates():
         (lambda: LinkStatus.from_moments('link_1', 1e5, 'a', 0.5), 'LinkStatus.wrinkling_moment'),
         (lambda: LinkStatus.from_moments('link_1', 1e5, 2.0, [1.0]), 'LinkStatus.moment'),
         (lambda: LinkStatus.from_moments('link_1', 0.0, 2.0, 1.0), 'LinkStatus.pressure'),
+        (lambda: PlanOutcome('done', '', '', (0, 0, 1), (0, 1, 1), 1, 0.1, 1.0, 0.0), 'PlanOutcome.status'),  # noqa: E501
+        (lambda: PlanOutcome('no_path', '', '', (0, 0, 1), (0, 1, 1), 0, 0.0, 0.0, 0.0), 'PlanOutcome.reason'),  # noqa: E501
+        (lambda: PlanOutcome('planned', 'x', '', (0, 0, 1), (0, 1, 1), 3, 0.1, 1.0, 0.0), 'PlanOutcome.reason'),  # noqa: E501
+        (lambda: PlanOutcome('planned', '', '', (0, 0, 1), (0, 1, 1), 0, 0.0, 0.0, 0.0), 'PlanOutcome.waypoints'),  # noqa: E501
+        (lambda: PlanOutcome('rejected', '', '', (0, 0, 1), (0, 1, 1), 2, 0.0, 0.0, 0.0), 'PlanOutcome.waypoints'),  # noqa: E501
+        (lambda: PlanOutcome('planned', '', '', (0, 0, 1), (0, 1, 1), 2, -0.1, 1.0, 0.0), 'PlanOutcome.length'),  # noqa: E501
     ],
 )
 def test_invalid_construction_raises_naming_the_field(build, path):
@@ -360,3 +367,11 @@ def test_import_does_not_import_rclpy():
         [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=60
     )
     assert result.returncode == 0, result.stderr
+
+
+def test_hardware_status_latched_faults_are_active_faults():
+    from inflarm_msgs_json import HardwareStatus
+    with pytest.raises(MessageError, match=r"HardwareStatus.latched: expected a subset of faults, "
+                                           r"got \['frozen_sensor'\]"):
+        HardwareStatus('active', 'connected', 'hold', 'safe', ('over_pressure',),
+                       ('frozen_sensor',), '', None, 0, 0, 0)

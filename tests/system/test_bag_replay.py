@@ -3,16 +3,15 @@ replay it with bag_player into load_estimator: all as real processes over real D
 
 import signal
 
-from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
 import rclpy
 from sensor_msgs.msg import JointState
 
-from inflarm_estimation.bag_estimate import main as estimate_bag
+from inflarm_bringup.bag_estimate import main as estimate_bag
 from inflarm_hw.bag import bag_info, deserialize, read_messages
-from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS
-from ros_harness import spin_until
+from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS
+from ros_harness import BaseFrameForces, spin_until
 
 pytestmark = pytest.mark.system
 LOAD = np.array([0.0, 10.0, -15.0])  # arm_sim's default tip load [N]
@@ -32,9 +31,8 @@ def test_a_recorded_run_gives_the_simulated_load_offline_and_when_replayed(
     bag = tmp_path / 'arm_run'
     probe = rclpy.create_node('probe', context=executor.context)
     joints: list[JointState] = []
-    wrenches: list[WrenchStamped] = []
-    probe.create_subscription(JointState, 'joint_states', joints.append, SENSOR_QOS)
-    probe.create_subscription(WrenchStamped, 'estimated_wrench', wrenches.append, RELIABLE_QOS)
+    wrenches = BaseFrameForces(probe)
+    probe.create_subscription(JointState, 'joint_states', joints.append, JOINT_STATE_QOS)
     executor.add_node(probe)
 
     # Record: arm_sim -> joint_states, tip_position_truth -> bag_recorder -> bag (SIGINT-stopped)
@@ -73,9 +71,8 @@ def test_a_recorded_run_gives_the_simulated_load_offline_and_when_replayed(
         'input': str(bag), 'topics': ['joint_states'], 'loop': True})
     assert spin_until(executor, lambda: len(wrenches) >= 50, timeout_s=20.0), \
         node_processes.output()
-    forces = np.array([[w.wrench.force.x, w.wrench.force.y, w.wrench.force.z]
-                       for w in wrenches])
+    forces = np.array([f for _, f in wrenches.forces])
     np.testing.assert_allclose(forces.mean(axis=0), LOAD, atol=0.3)
-    stamps = np.array([w.header.stamp.sec + w.header.stamp.nanosec * 1e-9 for w in wrenches])
+    stamps = np.array([t for t, _ in wrenches.forces])
     # The estimates are of the recorded samples: their stamps are the recorded ones.
     assert stamps.min() >= table[0, 0] - 1e-6 and stamps.max() <= table[-1, 0] + 1e-6

@@ -1,12 +1,12 @@
 """The inflatable arm chain as real processes: arm_sim -> load_estimator -> elastostatic_ik."""
 
-from geometry_msgs.msg import PointStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
 import rclpy
 
-from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
-from ros_harness import spin_until
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, SENSOR_QOS
+from ros_harness import BaseFrameForces, spin_until
 
 pytestmark = pytest.mark.system
 LOAD = np.array([0.0, 10.0, -15.0])
@@ -21,12 +21,8 @@ def test_the_load_is_estimated_and_the_target_reached_in_closed_loop(node_proces
         node_processes.start(package, node, '--params-file', arm_yaml,
                              parameters={'seed': 7} if node == 'arm_sim' else None)
     probe = rclpy.create_node('probe', context=executor.context)
-    wrenches: list[np.ndarray] = []
+    wrenches = BaseFrameForces(probe)
     tips: list[np.ndarray] = []
-    probe.create_subscription(
-        WrenchStamped, 'estimated_wrench',
-        lambda m: wrenches.append(np.array([m.wrench.force.x, m.wrench.force.y,
-                                            m.wrench.force.z])), RELIABLE_QOS)
     probe.create_subscription(
         PointStamped, 'tip_position_truth',
         lambda m: tips.append(np.array([m.point.x, m.point.y, m.point.z])), SENSOR_QOS)
@@ -36,7 +32,7 @@ def test_the_load_is_estimated_and_the_target_reached_in_closed_loop(node_proces
     # arm_sim -> load_estimator: the simulated load, recovered within the sensor noise
     assert spin_until(executor, lambda: len(wrenches) >= 50, timeout_s=20.0), \
         node_processes.output()
-    mean_force = np.mean(wrenches[-50:], axis=0)
+    mean_force = np.mean([f for _, f in wrenches.forces[-50:]], axis=0)
     np.testing.assert_allclose(mean_force, LOAD, atol=0.3)
 
     # elastostatic_ik + arm_sim, with the estimated load: the true tip reaches the target

@@ -116,13 +116,16 @@ def test_bad_input_is_skipped_with_a_reason_and_the_node_keeps_running(executor)
     rig = Rig(executor)
     good, _ = rig.render((0.0, 0.0, 0.7))
 
+    def last(topic: str) -> str:
+        return rig.node.problems.last.get(topic, '')
+
     def send(msg: Image, problem: str, sec: int = 2) -> None:
         def rejected() -> bool:
             rig.image(msg, sec)
-            return problem in rig.node.last_problem
-        assert spin_until(executor, rejected, timeout_s=5.0), (problem, rig.node.last_problem)
+            return problem in last('camera/image_raw')
+        assert spin_until(executor, rejected, timeout_s=5.0), (problem, rig.node.problems.last)
 
-    send(good, 'no camera_info yet', sec=1)  # before any camera_info
+    send(good, 'no camera_info received yet', sec=1)  # before any camera_info
     def info_taken() -> bool:
         rig.info()
         return rig.node.camera is not None
@@ -141,9 +144,10 @@ def test_bad_input_is_skipped_with_a_reason_and_the_node_keeps_running(executor)
     bad_info.k = [0.0] * 9
     def info_rejected() -> bool:
         rig.info_pub.publish(bad_info)
-        return 'camera_info rejected' in rig.node.last_problem
+        return 'expected k' in last('camera/camera_info')
     assert spin_until(executor, info_rejected)
     assert not any(p.header.stamp.sec == 2 for p in rig.points)
+    assert rig.node.problems.unexpected == 0
     # still running, with the last good camera_info
     assert rig.send_until_point(good, sec=30, with_info=False)
     assert rig.node.camera.width == 320

@@ -1,15 +1,24 @@
 """Elastostatic inverse kinematics: motor set points whose deflected tip reaches the target
 (Fig 6, eqs 8-9 of 000_...): the links' deflection under the tip load is compensated.
 
-A ``tip_target`` is solved at once and commanded; a ``tip_trajectory`` (poses stamped with the
-times they are due) is integrated with eq. 9 from the current motor angles and streamed at
-``command_rate_hz``. The load is the latest ``estimated_wrench`` or a configured one.
+A ``tip_target`` is solved at once; a ``tip_trajectory`` (poses stamped with the times they
+are due) is integrated with eq. 9 from the current motor angles. Either is checked whole before
+anything is commanded: every motor angle within the joint limits, the model's deflected tip
+within ``max_tip_error_m`` of every waypoint (an unreachable path fails here), the path no
+longer than ``max_duration_s``. The set point is streamed at ``command_rate_hz`` and, after a
+trajectory, held (re-sent) so that the motors' command watchdog stays fed. The load is the
+latest ``estimated_wrench`` or a configured one.
 
 Subscribes:
     tip_target (geometry_msgs/PointStamped, COMMAND_QOS): tip position to reach [m].
-    tip_trajectory (nav_msgs/Path, RELIABLE_QOS): timed tip positions [m].
-    joint_states (sensor_msgs/JointState, SENSOR_QOS): current joint_1..joint_3 angles.
-    estimated_wrench (geometry_msgs/WrenchStamped, RELIABLE_QOS): tip load [N].
+    tip_trajectory (nav_msgs/Path, RELIABLE_QOS): timed tip positions [m], at most
+        ``max_poses`` poses over at most ``max_duration_s``.
+    joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): current joint_1..joint_3 angles.
+    estimated_wrench (geometry_msgs/WrenchStamped, RELIABLE_QOS): tip load [N], in the base
+        frame or in the ``tip`` frame; a tip-frame wrench is turned into the base frame with the
+        estimated pose of the same stamp (``estimated_joint_states``).
+    estimated_joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): the estimator's deflected
+        pose, all 7 joints.
 Publishes:
     motor_position_command (sensor_msgs/JointState, COMMAND_QOS): joint_1..joint_3 [rad].
 Parameters:
@@ -17,13 +26,16 @@ Parameters:
     load.source (string): 'estimated' or 'configured'.
     load.force_n (double[3]): the configured tip load [N].
     gain_per_s (double): K of eq. 9 [1/s].
+    max_tip_error_m (double): largest model tip error accepted along a path [m].
+    max_duration_s (double), max_poses (int): bounds of an accepted trajectory.
     method (string, read-only): 'effective' (exact motor-to-tip map) or 'paper' (J_m^#).
-    command_rate_hz (double, read-only): trajectory streaming rate.
+    command_rate_hz (double, read-only): streaming rate.
     frame_id (string, read-only): base frame of targets.
+    tip_frame_id (string, read-only): frame of a tip-frame wrench.
 """
 
+from collections import OrderedDict
 import math
-import time
 
 from geometry_msgs.msg import PointStamped, WrenchStamped
 from nav_msgs.msg import Path
@@ -40,31 +52,35 @@ from inflarm_model.nodes.arm_parameters import (
     arm_from_parameters,
     check_arm_parameters,
 )
+from inflarm_model.ros_conversions import joint_arrays, joint_state
+from inflarm_model.urdf import TIP_LINK, check_joint_positions
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import (
-    COMMAND_QOS,
-    RELIABLE_QOS,
-    SENSOR_QOS,
-    publisher_events,
-    subscription_events,
-)
+from inflarm_msgs_json.ros.problems import InputError
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, RELIABLE_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
 PARAMETERS = ARM_PARAMETERS + (
     Parameter('load.source', 'estimated',
               "'estimated' (latest estimated_wrench) or 'configured' (load.force_n)"),
     Parameter('load.force_n', [0.0, 10.0, -15.0], 'configured tip load [N], base frame'),
-    Parameter('gain_per_s', 5.0, 'K of eq. 9 [1/s]', range=(0.0, 1000.0)),
+    Parameter('gain_per_s', 5.0, 'K of eq. 9 [1/s]', range=(0.01, 100.0)),
+    Parameter('max_tip_error_m', 0.01,
+              'largest model tip error accepted along a trajectory [m]', range=(1e-6, 0.1)),
+    Parameter('max_duration_s', 600.0, 'longest trajectory accepted [s]', range=(0.1, 3600.0)),
+    Parameter('max_poses', 10000, 'most poses accepted in a trajectory', range=(2, 100000)),
     Parameter('method', 'effective',
               "'effective' (exact motor-to-tip map) or 'paper' (J_m^# of eq. 8)", read_only=True),
-    Parameter('command_rate_hz', 50.0, 'trajectory streaming rate [Hz]', range=(1.0, 1000.0),
+    Parameter('command_rate_hz', 50.0, 'set point streaming rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
     Parameter('frame_id', 'base_link', 'base frame of targets', read_only=True),
+    Parameter('tip_frame_id', TIP_LINK, 'frame of a tip-frame estimated_wrench', read_only=True),
 )
 MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
 # Eq. 9 is integrated with explicit Euler, stable for dt * K < 1: paths are resampled (linearly)
 # so that dt * K stays at most this.
 MAX_EULER_STEP = 0.25
+POSES_KEPT = 50  # estimated poses kept to turn tip-frame wrenches of the same stamp
 
 
 def resample(times: np.ndarray, x_d: np.ndarray, max_dt: float):
@@ -90,7 +106,16 @@ def check_ik_parameters(values: dict) -> str | None:
     return problem
 
 
-class ElastostaticIk(Node):
+def check_motor_path(q_m: np.ndarray) -> None:
+    """InputError naming the first set point outside the joint limits."""
+    for i, row in enumerate(np.atleast_2d(q_m)):
+        try:
+            check_joint_positions(MOTORS, row)
+        except ValueError as error:
+            raise InputError('joint limit', f'set point {i}: {error}') from error
+
+
+class ElastostaticIk(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('elastostatic_ik', **kwargs)
@@ -101,20 +126,24 @@ class ElastostaticIk(Node):
         self.arm = arm_from_parameters(self.params)
         self.q_m: np.ndarray | None = None
         self.estimated_force: np.ndarray | None = None
+        self.poses: OrderedDict[int, np.ndarray] = OrderedDict()  # stamp [ns] -> q (7,)
+        self.pending_wrench: WrenchStamped | None = None  # tip frame, waiting for its pose
         self.trajectory: TrackingResult | None = None
-        self.trajectory_start = 0.0  # monotonic time of the trajectory's first waypoint
+        self.trajectory_start_ns = 0  # node clock time of the trajectory's first waypoint
+        self.set_point: np.ndarray | None = None  # last commanded, re-sent while idle
 
         for topic, kind, callback, qos in (
                 ('tip_target', PointStamped, self.on_target, COMMAND_QOS),
                 ('tip_trajectory', Path, self.on_trajectory, RELIABLE_QOS),
-                ('joint_states', JointState, self.on_joint_states, SENSOR_QOS),
-                ('estimated_wrench', WrenchStamped, self.on_wrench, RELIABLE_QOS)):
-            self.create_subscription(kind, topic, callback, qos,
-                                     event_callbacks=subscription_events(self, topic))
+                ('joint_states', JointState, self.on_joint_states, JOINT_STATE_QOS),
+                ('estimated_wrench', WrenchStamped, self.on_wrench, RELIABLE_QOS),
+                ('estimated_joint_states', JointState, self.on_estimated_pose,
+                 JOINT_STATE_QOS)):
+            self.create_guarded_subscription(kind, topic, callback, qos)
         self.command_pub = self.create_publisher(
             JointState, 'motor_position_command', COMMAND_QOS,
             event_callbacks=publisher_events(self, 'motor_position_command'))
-        self.create_timer(1.0 / self.params['command_rate_hz'], self.stream)
+        self.create_guarded_timer(1.0 / self.params['command_rate_hz'], self.stream)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(
             lambda parameters: self.params.update({q.name: q.value for q in parameters}))
@@ -127,75 +156,94 @@ class ElastostaticIk(Node):
     # -- inputs --------------------------------------------------------------------------------
 
     def on_joint_states(self, msg: JointState) -> None:
-        index = {name: i for i, name in enumerate(msg.name)}
-        if all(name in index for name in MOTORS) and len(msg.position) == len(msg.name):
-            q_m = np.array([msg.position[index[name]] for name in MOTORS])
-            if np.isfinite(q_m).all():
-                self.q_m = q_m
-                return
-        self.get_logger().warning(
-            f'joint_states ignored: expected finite positions of {list(MOTORS)}',
-            throttle_duration_sec=2.0)
+        self.q_m = joint_arrays(msg, MOTORS)['position']
+
+    def on_estimated_pose(self, msg: JointState) -> None:
+        q = joint_arrays(msg, FlexibleArm.JOINT_NAMES)['position']
+        self.poses[Time.from_msg(msg.header.stamp).nanoseconds] = q
+        while len(self.poses) > POSES_KEPT:
+            self.poses.popitem(last=False)
+        if self.pending_wrench is not None:
+            self.on_wrench(self.pending_wrench)
 
     def on_wrench(self, msg: WrenchStamped) -> None:
         force = np.array([msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z])
-        if np.isfinite(force).all():
-            self.estimated_force = force
+        if not np.isfinite(force).all():
+            raise InputError('not finite', f'force {force.tolist()} N')
+        frame = msg.header.frame_id
+        if frame == self.params['tip_frame_id']:
+            q = self.poses.get(Time.from_msg(msg.header.stamp).nanoseconds)
+            if q is None:  # its pose is on its way: use it when it comes
+                self.pending_wrench = msg
+                return
+            force = self.arm.fk(q)[:3, :3] @ force  # tip frame -> base frame
+        elif frame != self.params['frame_id']:
+            raise InputError('frame', f"frame_id '{frame}' is neither "
+                                      f"'{self.params['frame_id']}' nor "
+                                      f"'{self.params['tip_frame_id']}'")
+        self.pending_wrench = None
+        self.estimated_force = force
 
     def load(self) -> np.ndarray:
         """The tip load to compensate; ValueError (with the reason) when there is none."""
         if self.params['load.source'] == 'configured':
             return np.array(self.params['load.force_n'])
         if self.estimated_force is None:
-            raise ValueError('no estimated_wrench received yet')
+            raise InputError('no load', 'no estimated_wrench received yet')
         return self.estimated_force
 
     def check_frame(self, frame_id: str) -> None:
         if frame_id != self.params['frame_id']:
-            raise ValueError(f"frame_id '{frame_id}' is not '{self.params['frame_id']}'")
+            raise InputError('frame', f"frame_id '{frame_id}' is not '{self.params['frame_id']}'")
+
+    def current_motors(self) -> np.ndarray:
+        if self.q_m is None:
+            raise InputError('no joint states', 'no joint_states received yet')
+        return self.q_m
 
     def on_target(self, msg: PointStamped) -> None:
         target = np.array([msg.point.x, msg.point.y, msg.point.z])
-        try:
-            self.check_frame(msg.header.frame_id)
-            if self.q_m is None:
-                raise ValueError('no joint_states received yet')
-            q_m = solve_ik(self.arm, target, self.load(), self.params['arm.spring_stiffness'],
-                           self.q_m)
-        except ValueError as err:
-            self.get_logger().error(f'tip_target {target.tolist()} rejected: {err}')
-            return
+        self.check_frame(msg.header.frame_id)
+        q_m = solve_ik(self.arm, target, self.load(), self.params['arm.spring_stiffness'],
+                       self.current_motors())
+        check_motor_path(q_m)
         self.trajectory = None
         self.publish_command(q_m)
         self.get_logger().info(
             f'tip_target {np.round(target, 4).tolist()}: motors {np.round(q_m, 4).tolist()}')
 
     def on_trajectory(self, msg: Path) -> None:
-        try:
-            if len(msg.poses) < 2:
-                raise ValueError(f'expected at least 2 poses, got {len(msg.poses)}')
-            self.check_frame(msg.header.frame_id)
-            if self.q_m is None:
-                raise ValueError('no joint_states received yet')
-            stamps = np.array([Time.from_msg(p.header.stamp).nanoseconds for p in msg.poses])
-            times = (stamps - stamps[0]) * 1e-9
-            if not (np.diff(times) > 0.0).all():
-                raise ValueError('pose stamps must increase strictly: they give the times')
-            x_d = np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
-                            for p in msg.poses])
-            times, x_d = resample(times, x_d, MAX_EULER_STEP / max(self.params['gain_per_s'],
-                                                                   1e-9))
-            v_d = np.gradient(x_d, times, axis=0)
-            result = track_trajectory(
-                self.arm, times, x_d, v_d, self.load(), self.params['arm.spring_stiffness'],
-                self.q_m, self.params['gain_per_s'], method=self.params['method'])
-        except ValueError as err:
-            self.get_logger().error(f'tip_trajectory rejected: {err}')
-            return
+        p = self.params
+        if not 2 <= len(msg.poses) <= p['max_poses']:
+            raise InputError('pose count', f"expected 2 to {p['max_poses']} poses, got "
+                                           f'{len(msg.poses)}')
+        self.check_frame(msg.header.frame_id)
+        stamps = np.array([Time.from_msg(ps.header.stamp).nanoseconds for ps in msg.poses])
+        times = (stamps - stamps[0]) * 1e-9
+        if not (np.diff(times) > 0.0).all():
+            raise InputError('stamps', 'pose stamps must increase strictly: they give the times')
+        if times[-1] > p['max_duration_s']:
+            raise InputError('duration', f'the path lasts {times[-1]:.6g} s, over max_duration_s'
+                                         f" = {p['max_duration_s']} s")
+        x_d = np.array([[ps.pose.position.x, ps.pose.position.y, ps.pose.position.z]
+                        for ps in msg.poses])
+        if not np.isfinite(x_d).all():
+            raise InputError('not finite', 'the path has non-finite positions')
+        times, x_d = resample(times, x_d, MAX_EULER_STEP / p['gain_per_s'])
+        v_d = np.gradient(x_d, times, axis=0)
+        result = track_trajectory(
+            self.arm, times, x_d, v_d, self.load(), p['arm.spring_stiffness'],
+            self.current_motors(), p['gain_per_s'], method=p['method'])
+        check_motor_path(result.q_m)
+        worst = int(np.argmax(result.tip_error))
+        if result.tip_error[worst] > p['max_tip_error_m']:
+            raise InputError(
+                'tip error', f'the model tip strays {result.tip_error[worst]:.4g} m from '
+                f"waypoint {x_d[worst].round(4).tolist()} at {times[worst]:.3g} s (over "
+                f"max_tip_error_m = {p['max_tip_error_m']} m): out of reach or too fast")
         # The first waypoint is due at the path's first stamp; late paths start now.
-        delay = (stamps[0] - self.get_clock().now().nanoseconds) * 1e-9
         self.trajectory = result
-        self.trajectory_start = time.monotonic() + max(delay, 0.0)
+        self.trajectory_start_ns = max(int(stamps[0]), self.get_clock().now().nanoseconds)
         self.get_logger().info(
             f'tip_trajectory of {len(times)} poses over {times[-1]:.2f} s: model tip error '
             f'at most {result.tip_error.max() * 1000:.3f} mm')
@@ -203,20 +251,21 @@ class ElastostaticIk(Node):
     # -- output --------------------------------------------------------------------------------
 
     def stream(self) -> None:
-        if self.trajectory is None:
-            return
-        elapsed = time.monotonic() - self.trajectory_start
-        if elapsed < 0.0:
-            return
-        i = int(np.searchsorted(self.trajectory.times, elapsed, side='right')) - 1
-        self.publish_command(self.trajectory.q_m[i])
-        if i == len(self.trajectory.times) - 1:
-            self.trajectory = None  # the last set point stays commanded
+        if self.trajectory is not None:
+            elapsed = (self.get_clock().now().nanoseconds - self.trajectory_start_ns) * 1e-9
+            if elapsed < 0.0:
+                return
+            i = int(np.searchsorted(self.trajectory.times, elapsed, side='right')) - 1
+            self.set_point = self.trajectory.q_m[i]
+            if i == len(self.trajectory.times) - 1:
+                self.trajectory = None  # the last set point stays commanded
+        if self.set_point is not None:
+            self.publish_command(self.set_point)
 
     def publish_command(self, q_m: np.ndarray) -> None:
-        msg = JointState(name=list(MOTORS), position=q_m.tolist())
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.command_pub.publish(msg)
+        self.set_point = q_m
+        self.command_pub.publish(joint_state(MOTORS, self.get_clock().now().to_msg(),
+                                             position=q_m))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -8,9 +8,12 @@ are held. Without a memory, a ``pid_ilc`` task is seeded from the experiential k
 (when one is configured). A planned path is followed waypoint by waypoint with PID (section 4.2).
 
 Subscribes:
-    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m].
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m]; a point
+        outside the work space grown by ``workspace_margin_m`` is a bad measurement, rejected
+        (it reaches neither a report nor the ILC memory).
     control_task (std_msgs/String: ControlTask JSON, RELIABLE_QOS): start a trial.
-    planned_path (nav_msgs/Path, LATCHED_QOS): follow these waypoints, then hold the last.
+    planned_path (nav_msgs/Path, LATCHED_QOS): follow these waypoints (at most
+        ``max_waypoints``, each in the work space), then hold the last.
 Publishes:
     chamber_pressure_command (std_msgs/String: PressureCommand JSON, COMMAND_QOS) [Pa].
     trial_report (std_msgs/String: TrialReport JSON, RELIABLE_QOS): per-axis RMSE, reach time.
@@ -24,12 +27,14 @@ Parameters:
     rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, learning.*, quadrant_bellows
         (read-only),
     trial_duration_s, measurement_timeout_s, reach_tolerance_m, path_tolerance_m,
-    ilc_memory_path, knowledge_db_path (read-only), frame_id (read-only).
+    workspace_margin_m, max_waypoints, ilc_memory_path, knowledge_db_path (read-only),
+    frame_id (read-only).
+Times (trial steps, measurement freshness) are on the node clock, so that a replay under
+``use_sim_time`` runs the same steps.
 """
 
 import math
 import os
-import time
 
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
@@ -41,17 +46,18 @@ from std_srvs.srv import Trigger
 from inflarm_control.knowledge import KnowledgeDatabase, seed_memory
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams
 from inflarm_control.trial_metrics import TrialMetrics
-from inflarm_model.soft_arm import CHAMBERS, check_in_workspace
-from inflarm_msgs_json import ControlTask, MessageError, PressureCommand, TrialReport
+from inflarm_model.soft_arm import CHAMBERS, Workspace, check_in_workspace
+from inflarm_msgs_json import ControlTask, PressureCommand, TrialReport
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import (
     COMMAND_QOS,
     LATCHED_QOS,
     RELIABLE_QOS,
     SENSOR_QOS,
     publisher_events,
-    subscription_events,
 )
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -89,6 +95,11 @@ PARAMETERS = (
               range=(1e-4, 0.1)),
     Parameter('path_tolerance_m', 0.01, 'distance at which a path waypoint counts as reached [m]',
               range=(1e-3, 0.2)),
+    Parameter('workspace_margin_m', 0.05,
+              'ball positions farther than this outside the work space are rejected [m]',
+              range=(0.0, 0.5), read_only=True),
+    Parameter('max_waypoints', 10000, 'most waypoints accepted in a planned_path',
+              range=(1, 1000000)),
     Parameter('ilc_memory_path', '', 'file keeping the ILC memories across runs (.npz); empty: '
               'in memory only', read_only=True),
     Parameter('knowledge_db_path', '', 'experiential knowledge database seeding new pid_ilc '
@@ -102,7 +113,14 @@ def task_key(target: np.ndarray) -> tuple[int, int, int]:
     return tuple(int(v) for v in np.round(np.asarray(target) * 1000.0))
 
 
-class PressureController(Node):
+def grown(workspace: Workspace, margin: float) -> Workspace:
+    """``workspace`` grown by ``margin`` [m] on every side."""
+    return Workspace(f'{workspace.name}, grown by {margin} m', workspace.x_max + margin,
+                     workspace.y_max + margin, workspace.z_min - margin,
+                     workspace.z_max + margin)
+
+
+class PressureController(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('pressure_controller', **kwargs)
@@ -122,9 +140,10 @@ class PressureController(Node):
         self.memories = self.load_memories(p['ilc_memory_path'])
         self.knowledge = (KnowledgeDatabase.open(p['knowledge_db_path'])
                           if p['knowledge_db_path'] else None)
+        self.measurable = grown(self.core_params.workspace, p['workspace_margin_m'])
 
         self.position: np.ndarray | None = None
-        self.position_time = -math.inf
+        self.position_time_ns: int | None = None  # node clock
         self.task: ControlTask | None = None
         self.trial_active = False
         self.trial_steps = 0
@@ -132,26 +151,22 @@ class PressureController(Node):
         self.waypoints: list[np.ndarray] = []
         self.command: np.ndarray | None = None  # last published set pressures, held when idle
 
-        self.create_subscription(
-            PointStamped, 'ball_position', self.on_ball_position, SENSOR_QOS,
-            event_callbacks=subscription_events(self, 'ball_position'))
-        self.create_subscription(
-            String, 'control_task', self.on_control_task, RELIABLE_QOS,
-            event_callbacks=subscription_events(self, 'control_task'))
-        self.create_subscription(
-            Path, 'planned_path', self.on_planned_path, LATCHED_QOS,
-            event_callbacks=subscription_events(self, 'planned_path'))
+        self.create_guarded_subscription(
+            PointStamped, 'ball_position', self.on_ball_position, SENSOR_QOS)
+        self.create_guarded_subscription(
+            String, 'control_task', self.on_control_task, RELIABLE_QOS)
+        self.create_guarded_subscription(Path, 'planned_path', self.on_planned_path, LATCHED_QOS)
         self.command_pub = self.create_publisher(
             String, 'chamber_pressure_command', COMMAND_QOS,
             event_callbacks=publisher_events(self, 'chamber_pressure_command'))
         self.report_pub = self.create_publisher(
             String, 'trial_report', RELIABLE_QOS,
             event_callbacks=publisher_events(self, 'trial_report'))
-        self.create_service(Trigger, '~/start_trial', self.on_start_trial)
-        self.create_service(Trigger, '~/stop', self.on_stop)
-        self.create_service(Trigger, '~/vent', self.on_vent)
-        self.create_service(Trigger, '~/reset_learning', self.on_reset_learning)
-        self.create_timer(self.dt, self.step)
+        self.create_guarded_service(Trigger, '~/start_trial', self.on_start_trial)
+        self.create_guarded_service(Trigger, '~/stop', self.on_stop)
+        self.create_guarded_service(Trigger, '~/vent', self.on_vent)
+        self.create_guarded_service(Trigger, '~/reset_learning', self.on_reset_learning)
+        self.create_guarded_timer(self.dt, self.step)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: {p['rate_hz']} Hz, {len(self.memories)} ILC memories, knowledge database "
@@ -162,44 +177,33 @@ class PressureController(Node):
 
     # -- inputs --------------------------------------------------------------------------------
 
+    def check_frame(self, frame_id: str) -> None:
+        if frame_id != self.params['frame_id']:
+            raise InputError('frame', f"frame_id '{frame_id}' is not '{self.params['frame_id']}'")
+
     def on_ball_position(self, msg: PointStamped) -> None:
         point = np.array([msg.point.x, msg.point.y, msg.point.z])
-        if not np.isfinite(point).all() or msg.header.frame_id != self.params['frame_id']:
-            self.get_logger().warning(
-                f"ball_position ignored: expected a finite point in '{self.params['frame_id']}',"
-                f" got {point.tolist()} in '{msg.header.frame_id}'", throttle_duration_sec=2.0)
-            return
+        self.check_frame(msg.header.frame_id)
+        check_in_workspace(point, self.measurable, 'ball_position')
         self.position = point
-        self.position_time = time.monotonic()
+        self.position_time_ns = self.get_clock().now().nanoseconds
 
     def on_control_task(self, msg: String) -> None:
-        try:
-            task = from_string_msg(msg, expected=ControlTask)
-            if task.frame_id != self.params['frame_id']:
-                raise ValueError(
-                    f"frame_id '{task.frame_id}' is not '{self.params['frame_id']}'")
-        except (MessageError, ValueError) as err:
-            self.get_logger().error(f'control_task rejected: {err}')
-            return
+        task = from_string_msg(msg, expected=ControlTask)
+        self.check_frame(task.frame_id)
         self.waypoints = []
         self.start_task(task)
 
     def on_planned_path(self, msg: Path) -> None:
-        waypoints = [np.array([ps.pose.position.x, ps.pose.position.y, ps.pose.position.z])
-                     for ps in msg.poses]
-        try:
-            if not waypoints:
-                raise ValueError('the path has no poses')
-            if msg.header.frame_id != self.params['frame_id']:
-                raise ValueError(
-                    f"frame_id '{msg.header.frame_id}' is not '{self.params['frame_id']}'")
-            for i, waypoint in enumerate(waypoints):
-                check_in_workspace(waypoint, self.core_params.workspace, f'waypoint {i}')
-        except ValueError as err:
-            self.get_logger().error(f'planned_path rejected: {err}')
-            return
+        if not 1 <= len(msg.poses) <= self.params['max_waypoints']:
+            raise InputError('waypoint count', f"expected 1 to {self.params['max_waypoints']} "
+                                               f'poses, got {len(msg.poses)}')
+        self.check_frame(msg.header.frame_id)
+        waypoints = np.array([[ps.pose.position.x, ps.pose.position.y, ps.pose.position.z]
+                              for ps in msg.poses])
+        check_in_workspace(waypoints, self.core_params.workspace, 'waypoint')
         self.get_logger().info(f'following a path of {len(waypoints)} waypoints')
-        self.waypoints = waypoints[1:]
+        self.waypoints = list(waypoints[1:])
         self.start_task(ControlTask(frame_id=self.params['frame_id'],
                                     target=tuple(waypoints[0]), mode='pid', trial_id=0))
 
@@ -240,11 +244,12 @@ class PressureController(Node):
             if self.command is not None:
                 self.publish_command(self.command)  # hold: the MCU vents a silent controller
             return
-        fresh = time.monotonic() - self.position_time <= self.params['measurement_timeout_s']
+        fresh = (self.position_time_ns is not None
+                 and (self.get_clock().now().nanoseconds - self.position_time_ns) * 1e-9
+                 <= self.params['measurement_timeout_s'])
         if not fresh:
-            self.get_logger().warning(
-                'no fresh ball_position: holding the pressures, not learning',
-                throttle_duration_sec=2.0)
+            self.problems.warn('step', 'no fresh ball_position: holding the pressures, '
+                                       'not learning', kind='stale')
         position = self.position if fresh else np.full(3, np.nan)
         command = self.controller.step(position[None, :], self.dt, valid=[fresh])[0]
         self.publish_command(command)

@@ -23,7 +23,9 @@ import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
 
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -38,7 +40,7 @@ PARAMETERS = (
 )
 
 
-class TipPathDemo(Node):
+class TipPathDemo(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('tip_path_demo', **kwargs)
@@ -52,8 +54,9 @@ class TipPathDemo(Node):
         self.tip: np.ndarray | None = None
         self.errors: list[float] = []
         self.path_pub = self.create_publisher(Path, 'tip_trajectory', RELIABLE_QOS)
-        self.create_subscription(PointStamped, 'tip_position_truth', self.on_truth, SENSOR_QOS)
-        self.create_timer(p['duration_s'] + p['pause_s'], self.next_traverse)
+        self.create_guarded_subscription(PointStamped, 'tip_position_truth', self.on_truth,
+                                         SENSOR_QOS)
+        self.create_guarded_timer(p['duration_s'] + p['pause_s'], self.next_traverse)
         self.get_logger().info(f"ready: tip path {p['start']} <-> {p['goal']} m")
 
     def reference(self, elapsed: float) -> np.ndarray:
@@ -93,6 +96,8 @@ class TipPathDemo(Node):
 
     def on_truth(self, msg: PointStamped) -> None:
         tip = np.array([msg.point.x, msg.point.y, msg.point.z])
+        if not np.isfinite(tip).all():
+            raise InputError('not finite', f'tip {tip.tolist()} m')
         self.tip = tip
         if self.path_start is None:
             return

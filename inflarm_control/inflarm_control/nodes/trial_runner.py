@@ -26,10 +26,11 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from inflarm_msgs_json import ControlTask, MessageError, TrialReport
+from inflarm_msgs_json import ControlTask, TrialReport
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import RELIABLE_QOS, publisher_events, subscription_events
+from inflarm_msgs_json.ros.qos import RELIABLE_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
 PARAMETERS = (
@@ -44,7 +45,7 @@ PARAMETERS = (
 )
 
 
-class TrialRunner(Node):
+class TrialRunner(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('trial_runner', **kwargs)
@@ -59,11 +60,9 @@ class TrialRunner(Node):
         self.task_pub = self.create_publisher(
             String, 'control_task', RELIABLE_QOS,
             event_callbacks=publisher_events(self, 'control_task'))
-        self.create_subscription(
-            String, 'trial_report', self.on_report, RELIABLE_QOS,
-            event_callbacks=subscription_events(self, 'trial_report'))
+        self.create_guarded_subscription(String, 'trial_report', self.on_report, RELIABLE_QOS)
         self.vent_client = self.create_client(Trigger, 'pressure_controller/vent')
-        self.create_timer(0.2, self.tick)
+        self.create_guarded_timer(0.2, self.tick)
         self.add_post_set_parameters_callback(
             lambda parameters: self.params.update({q.name: q.value for q in parameters}))
         self.get_logger().info(f"ready: {p['trials']} {p['mode']} trials to {p['target']}")
@@ -88,11 +87,7 @@ class TrialRunner(Node):
             self.enter('vent')
 
     def on_report(self, msg: String) -> None:
-        try:
-            report = from_string_msg(msg, expected=TrialReport)
-        except MessageError as err:
-            self.get_logger().warning(f'trial_report ignored: {err}')
-            return
+        report = from_string_msg(msg, expected=TrialReport)
         if self.phase != 'run' or report.trial_index != self.trial:
             return
         reach = ', '.join('--' if t is None else f'{t:.1f}' for t in report.reach_time)

@@ -2,11 +2,13 @@
 
 Subscribes:
     motor_position_command (sensor_msgs/JointState, COMMAND_QOS): target angles [rad] of some
-        or all of joint_1..joint_3, by name.
+        or all of joint_1..joint_3, by name, within the joint limits; a command with a joint
+        outside its limits is rejected whole.
 Publishes:
-    joint_states (sensor_msgs/JointState, SENSOR_QOS): joint_1..joint_3 angles [rad],
-        velocities [rad/s] and, in ``effort``, the load torques on the motor axes [N·m]
-        (tau_m = U_m^T f, eq. 6 of 000_...), with sensor noise.
+    joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): joint_1..joint_3 angles [rad],
+        velocities [rad/s] and, in ``effort``, the torque each motor applies [N·m]: the
+        ros2_control convention, which in statics is -tau_m, the negative of the load torque
+        on the motor axis (eq. 6 of 000_...); with sensor noise.
     tip_position_truth (geometry_msgs/PointStamped, SENSOR_QOS): true deflected tip [m].
     spring_states_truth (sensor_msgs/JointState, SENSOR_QOS): true spring_1..spring_4
         deflections [rad] and torques [N·m].
@@ -18,12 +20,13 @@ Parameters:
     motor.time_constant_s, motor.max_velocity_rad_s (double, read-only): motor response.
     noise.position_rad, noise.effort_nm (double): sensor noise.
     wrinkling (bool, read-only): saturate link moments at M_max (Table 3).
+    cmd_timeout_s (double, 0.05-5): without a command for this long the motors hold where
+        they are (the fail-safe of a silent controller); 0 commands yet: they hold the start.
     seed (int, read-only): noise seed, -1 for a random one.
     frame_id (string, read-only): base frame.
 """
 
-import dataclasses
-import math
+import time
 
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -31,129 +34,100 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from inflarm_hw.inflatable_arm_sim import ArmSimParams, InflatableArmSim
-from inflarm_model.kinematics import FlexibleArm
-from inflarm_model.nodes.arm_parameters import (
-    ARM_PARAMETERS,
-    arm_from_parameters,
-    check_arm_parameters,
+from inflarm_hw.nodes.plant_parameters import (
+    ARM_PLANT_PARAMETERS,
+    apply_arm_plant_parameter,
+    arm_plant_from_parameters,
+    check_arm_plant_parameters,
 )
+from inflarm_model.kinematics import FlexibleArm
+from inflarm_model.ros_conversions import joint_arrays, joint_state
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import COMMAND_QOS, SENSOR_QOS, subscription_events
+from inflarm_msgs_json.ros.problems import InputError
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
 
-PARAMETERS = ARM_PARAMETERS + (
-    Parameter('tip_force_n', [0.0, 10.0, -15.0],
-              'external tip load [N], base frame (default: the sample load of section 4)'),
+PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('rate_hz', 50.0, 'simulation and publishing rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
-    Parameter('initial_motor_positions_rad', [0.0, 0.6, -1.2],
-              'joint_1..joint_3 at start [rad]', read_only=True),
-    Parameter('motor.time_constant_s', 0.1, 'motor position time constant [s]',
-              range=(0.001, 10.0), read_only=True),
-    Parameter('motor.max_velocity_rad_s', 1.0, 'motor rate limit [rad/s]', range=(0.01, 100.0),
-              read_only=True),
-    Parameter('noise.position_rad', 1e-4, 'motor angle noise (std) [rad]', range=(0.0, 0.1)),
-    Parameter('noise.effort_nm', 0.02, 'motor torque noise (std) [N m]', range=(0.0, 10.0)),
-    Parameter('wrinkling', False, 'saturate link moments at M_max (Table 3)', read_only=True),
+    Parameter('cmd_timeout_s', 1.0,
+              'hold the motors where they are after this long without a command [s]',
+              range=(0.05, 5.0)),
     Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
               read_only=True),
     Parameter('frame_id', 'base_link', 'base frame', read_only=True),
 )
+MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
 
 
-def _three_finite(value) -> bool:
-    return len(value) == 3 and all(math.isfinite(v) for v in value)
-
-
-class ArmSim(Node):
+class ArmSim(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('arm_sim', **kwargs)
         self.params = p = declare_parameters(self, PARAMETERS)
-        problem = check_arm_parameters(p) or next(
-            (f'{name} must be 3 finite numbers' for name in
-             ('tip_force_n', 'initial_motor_positions_rad') if not _three_finite(p[name])),
-            None)
+        problem = check_arm_plant_parameters(p)
         if problem is not None:
             raise ValueError(problem)
         seed = p['seed']
-        self.sim = InflatableArmSim(
-            arm_from_parameters(p), p['arm.spring_stiffness'], p['arm.link_pressure_pa'],
-            p['arm.link_radius_m'], p['initial_motor_positions_rad'],
-            ArmSimParams(motor_time_constant=p['motor.time_constant_s'],
-                         motor_max_velocity=p['motor.max_velocity_rad_s'],
-                         position_noise=p['noise.position_rad'],
-                         effort_noise=p['noise.effort_nm'], wrinkling=p['wrinkling']),
-            np.random.default_rng(None if seed < 0 else seed))
-        self.sim.set_tip_force(p['tip_force_n'])
+        self.sim = arm_plant_from_parameters(p, np.random.default_rng(None if seed < 0 else seed))
         self.dt = 1.0 / p['rate_hz']
+        self.last_command_time: float | None = None  # steady clock; None: holding
 
-        self.create_subscription(
-            JointState, 'motor_position_command', self.on_command, COMMAND_QOS,
-            event_callbacks=subscription_events(self, 'motor_position_command'))
-        self.joint_state_pub = self.create_publisher(JointState, 'joint_states', SENSOR_QOS)
+        self.create_guarded_subscription(
+            JointState, 'motor_position_command', self.on_command, COMMAND_QOS)
+        self.joint_state_pub = self.create_publisher(JointState, 'joint_states', JOINT_STATE_QOS)
         self.tip_pub = self.create_publisher(PointStamped, 'tip_position_truth', SENSOR_QOS)
         self.spring_pub = self.create_publisher(JointState, 'spring_states_truth', SENSOR_QOS)
-        self.create_timer(self.dt, self.step)
+        self.create_guarded_timer(self.dt, self.step)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(f"ready: tip load {p['tip_force_n']} N at {p['rate_hz']} Hz")
 
     def on_set_parameters(self, parameters) -> SetParametersResult:
-        values = {q.name: q.value for q in parameters}
-        problem = check_arm_parameters(values)
-        if problem is None and 'tip_force_n' in values and not _three_finite(
-                values['tip_force_n']):
-            problem = f"tip_force_n must be 3 finite numbers, got {values['tip_force_n']}"
+        problem = check_arm_plant_parameters({q.name: q.value for q in parameters})
         return SetParametersResult(successful=problem is None, reason=problem or '')
 
     def on_parameters_set(self, parameters) -> None:
         for q in parameters:
             self.params[q.name] = q.value
-            if q.name == 'tip_force_n':
-                self.sim.set_tip_force(q.value)
-                self.get_logger().info(f'tip load now {list(q.value)} N')
-            elif q.name == 'arm.spring_stiffness':
-                self.sim.set_stiffness(q.value)
-            elif q.name == 'arm.link_pressure_pa':
-                self.sim.set_link_pressure(q.value)
-            elif q.name.startswith('noise.'):
-                field = {'noise.position_rad': 'position_noise',
-                         'noise.effort_nm': 'effort_noise'}[q.name]
-                self.sim.params = dataclasses.replace(self.sim.params, **{field: q.value})
+            change = apply_arm_plant_parameter(self.sim, q.name, q.value)
+            if change is not None:
+                self.get_logger().info(change)
 
     def on_command(self, msg: JointState) -> None:
-        names = FlexibleArm.MOTOR_JOINT_NAMES
-        unknown = sorted(set(msg.name) - set(names))
-        if (unknown or len(msg.position) != len(msg.name)
-                or not all(math.isfinite(v) for v in msg.position)):
-            self.get_logger().warning(
-                f'motor_position_command rejected: expected finite positions of {list(names)},'
-                f' got {list(msg.name)} = {list(msg.position)}', throttle_duration_sec=2.0)
-            return
+        names = [n for n in MOTORS if n in msg.name]
+        unknown = sorted(set(msg.name) - set(MOTORS))
+        if unknown or not names:
+            raise InputError('unknown joint', f'unknown joints {unknown or list(msg.name)}, '
+                                              f'expected some of {list(MOTORS)}')
+        positions = joint_arrays(msg, names)['position']
         target = self.sim.target.copy()
-        for name, position in zip(msg.name, msg.position, strict=True):
-            target[names.index(name)] = position
+        for name, position in zip(names, positions, strict=True):
+            target[MOTORS.index(name)] = position
         self.sim.command(target)
+        self.last_command_time = time.monotonic()
 
     def step(self) -> None:
+        timeout = self.params['cmd_timeout_s']
+        if (self.last_command_time is not None
+                and time.monotonic() - self.last_command_time > timeout):
+            self.last_command_time = None
+            self.sim.command(self.sim.q_m)
+            self.get_logger().warning(
+                f'no motor_position_command for {timeout} s: holding the motors where they are')
         try:
             state = self.sim.step(self.dt)
         except RuntimeError as err:  # no equilibrium: hold the last state, say why
-            self.get_logger().error(str(err), throttle_duration_sec=2.0)
+            self.problems.warn('step', str(err))
             return
         stamp = self.get_clock().now().to_msg()
-        joints = JointState(name=list(FlexibleArm.MOTOR_JOINT_NAMES),
-                            position=state.q_m.tolist(), velocity=state.dq_m.tolist(),
-                            effort=state.tau_m.tolist())
-        joints.header.stamp = stamp
-        self.joint_state_pub.publish(joints)
-        springs = JointState(name=list(FlexibleArm.SPRING_JOINT_NAMES),
-                             position=state.q_k.tolist(),
-                             effort=(self.sim.stiffness * state.q_k).tolist())
-        springs.header.stamp = stamp
-        self.spring_pub.publish(springs)
+        self.joint_state_pub.publish(joint_state(
+            FlexibleArm.MOTOR_JOINT_NAMES, stamp, position=state.q_m, velocity=state.dq_m,
+            effort=-state.tau_m))
+        self.spring_pub.publish(joint_state(
+            FlexibleArm.SPRING_JOINT_NAMES, stamp, position=state.q_k,
+            effort=self.sim.stiffness * state.q_k))
         tip = PointStamped()
         tip.header.stamp = stamp
         tip.header.frame_id = self.params['frame_id']

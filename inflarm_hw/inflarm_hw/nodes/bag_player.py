@@ -9,6 +9,8 @@ drifting. At the end the player logs a summary and idles, or with ``loop`` start
 Publishes:
     each recorded topic (or those in ``topics``) with its recorded type: REPLAY_QOS, or
     LATCHED_REPLAY_QOS where every recorded publisher of the topic was transient-local.
+    /clock (rosgraph_msgs/Clock), when ``clock_rate_hz`` > 0: the bag time being played, so
+    that nodes run with ``use_sim_time`` follow the recording's time (``ros2 bag play --clock``).
 Parameters:
     input (string, read-only): bag directory to replay; required.
     rate (double, 0.001-1000): playback speed (2.0 plays twice as fast); may change at runtime.
@@ -17,6 +19,7 @@ Parameters:
         the root namespace); unset: all of them.
     start_delay_s (double, read-only): wait this long before the first message, so that
         subscribers discover the player's publishers and miss nothing.
+    clock_rate_hz (double, read-only): rate of /clock [Hz]; 0: no /clock.
 """
 
 import time
@@ -24,9 +27,12 @@ import time
 from rclpy.node import Node
 from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
 
 from inflarm_hw.bag import BagMessage, TopicInfo, bag_info, read_messages, select_topics
 from inflarm_hw.nodes.bag_recorder import message_class
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.qos import publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
@@ -44,6 +50,7 @@ LATCHED_REPLAY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                 durability=DurabilityPolicy.TRANSIENT_LOCAL,
                                 history=HistoryPolicy.KEEP_LAST)
 MIN_TICK_NS = 100_000  # 0.1 ms: the timer's shortest re-arm
+MAX_BURST_NS = 20_000_000  # a tick that catches up returns to the executor after 20 ms
 MAX_TICK_NS = 500_000_000  # idle ticks at least every 0.5 s
 
 PARAMETERS = (
@@ -55,7 +62,11 @@ PARAMETERS = (
               read_only=True),
     Parameter('start_delay_s', 1.0, 'wait before the first message, for discovery [s]',
               range=(0.0, 3600.0), read_only=True),
+    Parameter('clock_rate_hz', 0.0, 'rate of /clock with the bag time [Hz]; 0: no /clock',
+              range=(0.0, 1000.0), read_only=True),
 )
+CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       history=HistoryPolicy.KEEP_LAST)
 
 
 def replay_qos(topic: TopicInfo) -> QoSProfile:
@@ -65,7 +76,7 @@ def replay_qos(topic: TopicInfo) -> QoSProfile:
     return LATCHED_REPLAY_QOS if latched else REPLAY_QOS
 
 
-class BagPlayer(Node):
+class BagPlayer(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('bag_player', **kwargs)
@@ -91,7 +102,12 @@ class BagPlayer(Node):
         self.passes = 0
         self.played = 0
         self.done = False
-        self.timer = self.create_timer(max(p['start_delay_s'], MIN_TICK_NS * 1e-9), self.tick)
+        self.timer = self.create_guarded_timer(max(p['start_delay_s'], MIN_TICK_NS * 1e-9),
+                                               self.tick)
+        self.clock_pub = None
+        if p['clock_rate_hz'] > 0.0:
+            self.clock_pub = self.create_publisher(Clock, '/clock', CLOCK_QOS)
+            self.create_guarded_timer(1.0 / p['clock_rate_hz'], self.publish_clock)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f'ready: {self.total} messages on {self.topics} from {self.info.path} at rate '
@@ -111,6 +127,20 @@ class BagPlayer(Node):
                 self.done = False
                 self.rearm(0)
             self.get_logger().info(f'{q.name} now {q.value}')
+
+    def bag_time_ns(self) -> int:
+        """The bag time playing now: before the first message its time, after the last the
+        last one's."""
+        if self.passes == 0:
+            return self.info.start_ns
+        if self.pending is None:
+            return self.info.start_ns + self.info.duration_ns
+        now = time.monotonic_ns()
+        return min(self.bag_origin_ns + round((now - self.wall_origin_ns) * self.params['rate']),
+                   self.pending.timestamp_ns)
+
+    def publish_clock(self) -> None:
+        self.clock_pub.publish(Clock(clock=Time(nanoseconds=self.bag_time_ns()).to_msg()))
 
     def due_ns(self, message: BagMessage) -> int:
         return self.wall_origin_ns + round(
@@ -142,6 +172,8 @@ class BagPlayer(Node):
             self.topic_pubs[self.pending.topic].publish(self.pending.data)
             self.played += 1
             self.pending = next(self.messages, None)
+            if time.monotonic_ns() - now > MAX_BURST_NS:
+                break  # let the executor run (other callbacks, a stop request) in between
         if self.pending is not None:
             self.rearm(self.due_ns(self.pending) - time.monotonic_ns())
             return

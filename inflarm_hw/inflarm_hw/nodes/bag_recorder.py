@@ -7,7 +7,8 @@ the node is destroyed, which ``main`` does on Ctrl-C and SIGTERM: a recording st
 is a complete bag, while a SIGKILLed one is unreadable.
 
 Subscribes:
-    each of ``topics`` (any ROS 2 Jazzy message type, raw CDR, RECORD_QOS).
+    each of ``topics`` (any ROS 2 Jazzy message type, raw CDR), with the QoS its publishers
+    offer (`recording_qos`): latched topics such as ``robot_description`` are recorded.
 Parameters:
     topics (string[], read-only): topics to record; required. Relative names resolve in the
         node's namespace, and remappings apply.
@@ -21,7 +22,6 @@ Parameters:
 import functools
 import importlib
 import os
-import signal
 import time
 
 from rclpy.exceptions import InvalidTopicNameException
@@ -31,16 +31,11 @@ from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from inflarm_hw.bag import STORAGES, BagWriter, TopicQos
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.spin import spin_node
 
-# Best effort and volatile, the weakest request, is compatible with every publisher: a reliable
-# subscription gets nothing from a best-effort publisher (joint_states, SENSOR_QOS), a
-# transient-local one nothing from a volatile publisher. The price: from reliable publishers a
-# lost sample is not resent, and transient-local history is not replayed to the recorder.
-# Depth 100 absorbs bursts while the callback writes to disk.
-RECORD_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
-                        durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+RECORD_DEPTH = 100  # absorbs bursts while the callback writes to disk
 DISCOVERY_PERIOD_S = 0.2
 
 PARAMETERS = (
@@ -81,7 +76,22 @@ def offered_qos(profile: QoSProfile) -> TopicQos:
                           profile.history.name, profile.depth)
 
 
-class BagRecorder(Node):
+def recording_qos(offered: list[TopicQos]) -> QoSProfile:
+    """The subscription QoS that matches every offered profile and loses the least.
+
+    Reliable only where every publisher is reliable (a reliable subscription gets nothing from a
+    best-effort publisher); transient-local only where every publisher is (a transient-local one
+    gets nothing from a volatile publisher), and then their latched history reaches the recorder.
+    """
+    reliable = all(q.reliability == 'reliable' for q in offered)
+    latched = all(q.durability == 'transient_local' for q in offered)
+    return QoSProfile(
+        depth=RECORD_DEPTH, history=HistoryPolicy.KEEP_LAST,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+class BagRecorder(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('bag_recorder', **kwargs)
@@ -93,7 +103,7 @@ class BagRecorder(Node):
         self.bag = BagWriter(os.path.abspath(output), storage=p['storage'])  # checks output
         self.pending = list(self.topics)
         self.start_time = time.monotonic()
-        self.discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self.discover)
+        self.discovery_timer = self.create_guarded_timer(DISCOVERY_PERIOD_S, self.discover)
         self.add_post_set_parameters_callback(
             lambda parameters: self.params.update({q.name: q.value for q in parameters}))
         self.get_logger().info(
@@ -125,24 +135,26 @@ class BagRecorder(Node):
                 self.get_logger().warning(
                     f'{topic} is published with several types {types[topic]}: recording '
                     f'{msgtype}')
+            offered = [offered_qos(info.qos_profile) for info in publishers]
             try:
                 msg_class = message_class(msgtype)
-                self.bag.add_topic(topic, msgtype, [offered_qos(info.qos_profile)
-                                                    for info in publishers])
+                self.bag.add_topic(topic, msgtype, offered)
             except ValueError as err:
                 self.get_logger().error(f'{topic} will not be recorded: {err}')
                 continue
-            self.create_subscription(msg_class, topic, functools.partial(self.on_message, topic),
-                                     RECORD_QOS, raw=True)
-            self.get_logger().info(f'recording {topic} ({msgtype})')
+            qos = recording_qos(offered)
+            self.create_guarded_subscription(
+                msg_class, topic, functools.partial(self.on_message, topic), qos, raw=True)
+            self.get_logger().info(
+                f'recording {topic} ({msgtype}, {qos.reliability.name.lower()}, '
+                f'{qos.durability.name.lower()})')
         if not self.pending:
             self.discovery_timer.cancel()
             return
         timeout = self.params['discovery_timeout_s']
         if time.monotonic() - self.start_time >= timeout:
-            self.get_logger().warning(
-                f'no publisher yet on {self.pending} after {timeout} s; still looking',
-                throttle_duration_sec=timeout)
+            self.problems.warn('discovery', f'no publisher yet on {self.pending} after '
+                                            f'{timeout} s; still looking', kind='no publisher')
 
     def on_message(self, topic: str, data: bytes) -> None:
         # Receive time, as ros2 bag record stores: every type has one (std_msgs/String has no
@@ -174,11 +186,6 @@ class BagRecorder(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    # Python's Ctrl-C handler raises KeyboardInterrupt wherever the main thread is, which may be
-    # inside a write (a message stored but not counted, a half-written MCAP record). Without it,
-    # rclpy's own handler (installed by rclpy.init, which chains to this one) still shuts the
-    # context down, and spin returns between callbacks; the bag is then closed cleanly.
-    signal.signal(signal.SIGINT, lambda signum, frame: None)
     spin_node(BagRecorder, args)
 
 

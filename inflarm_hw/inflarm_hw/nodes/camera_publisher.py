@@ -88,9 +88,9 @@ class CameraPublisher:
 
     Parameters
     ----------
-    node : rclpy.node.Node
+    node : rclpy.node.Node with inflarm_msgs_json.ros.node.GuardedCallbacks
         Has declared `CAMERA_PARAMETERS` and ``camera_rate_hz``; ``params`` holds their
-        current values (the node keeps it up to date).
+        current values (the node keeps it up to date). Its timers are guarded.
     params : dict
     ball_position : callable
         Returns the ball's centre in the node's frame [m], shape (3,).
@@ -106,7 +106,8 @@ class CameraPublisher:
         self.renderer = synthetic_camera_from_parameters(params, seed)
         self.image_pub = node.create_publisher(Image, 'camera/image_raw', SENSOR_QOS)
         self.info_pub = node.create_publisher(CameraInfo, 'camera/camera_info', SENSOR_QOS)
-        self.timer = node.create_timer(1.0 / params['camera_rate_hz'], self.capture)
+        self.timer = node.create_guarded_timer(1.0 / params['camera_rate_hz'], self.capture,
+                                               name='camera')
         self._pending: list = []  # one-shot timers of frames waiting for their latency
 
     def capture(self) -> None:
@@ -133,7 +134,7 @@ class CameraPublisher:
             self.node.destroy_timer(holder[0])
             self._pending.remove(holder[0])
 
-        holder.append(self.node.create_timer(remaining, deliver))
+        holder.append(self.node.create_guarded_timer(remaining, deliver, name='camera'))
         self._pending.append(holder[0])
 
     def publish(self, image: Image, info: CameraInfo) -> None:

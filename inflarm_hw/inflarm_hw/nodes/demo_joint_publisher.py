@@ -1,7 +1,7 @@
 """Publishes sinusoidal joint states: the smallest live data source, for smoke tests and demos.
 
 Publishes:
-    joint_states (sensor_msgs/JointState, SENSOR_QOS): positions [rad] and velocities [rad/s]
+    joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): positions [rad] and velocities [rad/s]
         of ``joint_names``, each a sine of amplitude ``amplitude_rad`` and a phase per joint.
 Parameters:
     joint_names (string[], read-only): joint names.
@@ -16,8 +16,9 @@ import time
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import SENSOR_QOS, publisher_events
+from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
 PARAMETERS = (
@@ -28,16 +29,16 @@ PARAMETERS = (
 )
 
 
-class DemoJointPublisher(Node):
+class DemoJointPublisher(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('demo_joint_publisher', **kwargs)
         self.params = declare_parameters(self, PARAMETERS)
         self.joint_state_pub = self.create_publisher(
-            JointState, 'joint_states', SENSOR_QOS,
+            JointState, 'joint_states', JOINT_STATE_QOS,
             event_callbacks=publisher_events(self, 'joint_states'))
         self.start_time = time.monotonic()
-        self.timer = self.create_timer(1.0 / self.params['rate_hz'], self.publish)
+        self.timer = self.create_guarded_timer(1.0 / self.params['rate_hz'], self.publish)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: {len(self.params['joint_names'])} joints at {self.params['rate_hz']} Hz")

@@ -1,7 +1,8 @@
 """Reports what flows on ``joint_states``: message rate and latest positions, at a fixed period.
 
 Subscribes:
-    joint_states (sensor_msgs/JointState, SENSOR_QOS)
+    joint_states (sensor_msgs/JointState, SENSOR_QOS: best effort, so that it hears reliable and
+        best-effort publishers alike, as ``ros2 topic hz`` does)
 Parameters:
     report_period_s (double, 0.1-60): how often to log a report.
 """
@@ -12,8 +13,10 @@ import time
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import SENSOR_QOS, subscription_events
+from inflarm_msgs_json.ros.problems import InputError
+from inflarm_msgs_json.ros.qos import SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
 
 PARAMETERS = (
@@ -21,7 +24,7 @@ PARAMETERS = (
 )
 
 
-class JointStateMonitor(Node):
+class JointStateMonitor(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('joint_state_monitor', **kwargs)
@@ -30,20 +33,17 @@ class JointStateMonitor(Node):
         self.received = 0
         self.rejected = 0
         self.window_start = time.monotonic()
-        self.create_subscription(
-            JointState, 'joint_states', self.on_joint_state, SENSOR_QOS,
-            event_callbacks=subscription_events(self, 'joint_states'))
-        self.create_timer(self.params['report_period_s'], self.report)
+        self.create_guarded_subscription(JointState, 'joint_states', self.on_joint_state,
+                                         SENSOR_QOS)
+        self.create_guarded_timer(self.params['report_period_s'], self.report)
         self.get_logger().info('ready: listening on joint_states')
 
     def on_joint_state(self, msg: JointState) -> None:
         if len(msg.position) != len(msg.name) or not all(map(math.isfinite, msg.position)):
             self.rejected += 1
-            self.get_logger().warning(
-                'joint_states: expected one finite position per name, got '
-                f'{len(msg.name)} names and positions {list(msg.position)}',
-                throttle_duration_sec=5.0)
-            return
+            raise InputError('bad positions', 'expected one finite position per name, got '
+                                              f'{len(msg.name)} names and positions '
+                                              f'{list(msg.position)}')
         self.latest = msg
         self.received += 1
 

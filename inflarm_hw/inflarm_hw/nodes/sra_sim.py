@@ -16,7 +16,8 @@ Parameters:
     physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates.
     publish_ball_position (bool): publish the simulated measurement on ``ball_position``.
     measurement_noise_m (double): camera noise per axis [m].
-    cmd_timeout_s (double): without a command for this long the MCU vents every chamber.
+    cmd_timeout_s (double, 0.05-5): without a command for this long the MCU vents every chamber.
+    max_chamber_pressure_pa (double, read-only): commands above this are rejected whole.
     frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
     seed (int, read-only): noise seed, -1 for a random one.
     camera.* : the simulated camera (``inflarm_hw.nodes.camera_publisher.CAMERA_PARAMETERS``).
@@ -32,17 +33,12 @@ from std_msgs.msg import String
 
 from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
-from inflarm_model.soft_arm import CHAMBERS
-from inflarm_msgs_json import ChamberPressures, MessageError, PressureCommand
+from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
+from inflarm_msgs_json import ChamberPressures, PressureCommand
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import (
-    COMMAND_QOS,
-    RELIABLE_QOS,
-    SENSOR_QOS,
-    publisher_events,
-    subscription_events,
-)
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
 PARAMETERS = (
@@ -56,14 +52,17 @@ PARAMETERS = (
               'publish the simulated camera measurement on ball_position', read_only=True),
     Parameter('measurement_noise_m', 0.0005, 'camera noise per axis [m]', range=(0.0, 0.05)),
     Parameter('cmd_timeout_s', 2.0, 'vent every chamber after this long without a command [s]',
-              range=(0.1, 600.0)),
+              range=(0.05, 5.0)),
+    Parameter('max_chamber_pressure_pa', CHAMBER_MAX_PRESSURE,
+              'commands above this chamber pressure are rejected [Pa]', range=(1e3, 900e3),
+              read_only=True),
     Parameter('frame_id', 'sra_mount', 'frame of the published points', read_only=True),
     Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
               read_only=True),
 ) + CAMERA_PARAMETERS
 
 
-class SraSim(Node):
+class SraSim(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('sra_sim', **kwargs)
@@ -76,9 +75,8 @@ class SraSim(Node):
         self.last_command_time = time.monotonic()
         self.vented = True
 
-        self.create_subscription(
-            String, 'chamber_pressure_command', self.on_command, COMMAND_QOS,
-            event_callbacks=subscription_events(self, 'chamber_pressure_command'))
+        self.create_guarded_subscription(
+            String, 'chamber_pressure_command', self.on_command, COMMAND_QOS)
         self.pressures_pub = self.create_publisher(
             String, 'chamber_pressures', RELIABLE_QOS,
             event_callbacks=publisher_events(self, 'chamber_pressures'))
@@ -86,10 +84,11 @@ class SraSim(Node):
         self.ball_pub = None
         if self.params['publish_ball_position']:
             self.ball_pub = self.create_publisher(PointStamped, 'ball_position', SENSOR_QOS)
-            self.create_timer(1.0 / self.params['camera_rate_hz'], self.publish_measurement)
+            self.create_guarded_timer(1.0 / self.params['camera_rate_hz'],
+                                      self.publish_measurement)
         self.dt = 1.0 / self.params['physics_rate_hz']
-        self.create_timer(self.dt, self.step)
-        self.create_timer(1.0 / self.params['state_rate_hz'], self.publish_state)
+        self.create_guarded_timer(self.dt, self.step)
+        self.create_guarded_timer(1.0 / self.params['state_rate_hz'], self.publish_state)
         self.camera = None
         if self.params['camera.enabled']:
             self.camera = CameraPublisher(self, self.params, lambda: self.plant.end_point[0],
@@ -107,17 +106,9 @@ class SraSim(Node):
                                                         noise_std=parameter.value)
 
     def on_command(self, msg: String) -> None:
-        try:
-            command = from_string_msg(msg, expected=PressureCommand).as_dict()
-            unknown = sorted(set(command) - set(CHAMBERS))
-            if unknown:
-                raise MessageError(
-                    f'PressureCommand.chambers: unknown chambers {unknown}, '
-                    f'expected some of {list(CHAMBERS)}')
-        except MessageError as err:
-            self.get_logger().warning(
-                f'chamber_pressure_command rejected: {err}', throttle_duration_sec=2.0)
-            return
+        command = check_chamber_pressures(
+            from_string_msg(msg, expected=PressureCommand).as_dict(),
+            self.params['max_chamber_pressure_pa'])
         for name, pressure in command.items():
             self.command[CHAMBERS.index(name)] = pressure
         self.last_command_time = time.monotonic()

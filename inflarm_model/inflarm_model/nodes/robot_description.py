@@ -15,12 +15,13 @@ from std_msgs.msg import String
 
 from inflarm_model.nodes.arm_parameters import ARM_PARAMETERS, check_arm_parameters
 from inflarm_model.urdf import flexible_arm_urdf
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import declare_parameters
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
 
-class RobotDescription(Node):
+class RobotDescription(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('robot_description', **kwargs)

@@ -10,13 +10,19 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 
-# Streams where the newest sample is all that matters (joint states, images, ball positions).
+# High-rate sensor streams where the newest sample is all that matters (images, ball positions,
+# simulated ground truth): best effort, so a slow subscriber never holds the publisher up.
 SENSOR_QOS = qos_profile_sensor_data
+# joint_states as ros2_control's joint_state_broadcaster publishes it and robot_state_publisher
+# subscribes to it: reliable, volatile, the last 10.
+JOINT_STATE_QOS = QoSProfile(
+    depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
+)
 # Commands: reliable, only the newest is worth executing.
 COMMAND_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
 )
-# Results and reports that must all arrive (trial reports, estimates).
+# Results and reports that must all arrive (trial reports, estimates, diagnostics).
 RELIABLE_QOS = QoSProfile(
     depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
 )

@@ -30,8 +30,9 @@ Parameters:
     publish_debug_image (bool): publish ``~/debug_image``.
     diagnostics_period_s (double, read-only).
 Bad input (empty, truncated or wrongly sized images, unknown encodings, images before any
-camera_info or of another size than it, invalid camera_info): a throttled warning, nothing
-published, the node keeps running.
+camera_info or of another size than it, invalid camera_info) is rejected by the callback guards
+(``inflarm_msgs_json.ros.node``): a warning throttled per kind of problem, nothing published,
+the node keeps running.
 """
 
 import time
@@ -42,18 +43,14 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.time import Time
 from sensor_msgs.msg import CameraInfo, Image
 
 from inflarm_model.camera import PinholeCamera
 from inflarm_msgs_json.ros.image import image_to_bgr, numpy_to_image
+from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import (
-    RELIABLE_QOS,
-    SENSOR_QOS,
-    publisher_events,
-    subscription_events,
-)
+from inflarm_msgs_json.ros.problems import InputError
+from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 from inflarm_vision.pipeline import BallPipeline, settings_from_parameters
 from inflarm_vision.tracker import DetectorParams
@@ -110,7 +107,7 @@ class _Window:
         self.processing_s: list[float] = []
 
 
-class BallTrackerNode(Node):
+class BallTrackerNode(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('ball_tracker', **kwargs)
@@ -118,19 +115,15 @@ class BallTrackerNode(Node):
         self.pipeline = BallPipeline(settings_from_parameters(self.params))
         self.camera: PinholeCamera | None = None
         self.window = _Window()
-        self.last_problem = ''
         self.point_pub = self.create_publisher(
             PointStamped, 'ball_position', SENSOR_QOS,
             event_callbacks=publisher_events(self, 'ball_position'))
         self.debug_pub = self.create_publisher(Image, '~/debug_image', SENSOR_QOS)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, 'diagnostics', RELIABLE_QOS)
-        self.create_subscription(
-            CameraInfo, 'camera/camera_info', self.on_camera_info, SENSOR_QOS,
-            event_callbacks=subscription_events(self, 'camera/camera_info'))
-        self.create_subscription(
-            Image, 'camera/image_raw', self.on_image, SENSOR_QOS,
-            event_callbacks=subscription_events(self, 'camera/image_raw'))
-        self.create_timer(self.params['diagnostics_period_s'], self.publish_diagnostics)
+        self.create_guarded_subscription(CameraInfo, 'camera/camera_info', self.on_camera_info,
+                                         SENSOR_QOS)
+        self.create_guarded_subscription(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
+        self.create_guarded_timer(self.params['diagnostics_period_s'], self.publish_diagnostics)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
@@ -155,14 +148,8 @@ class BallTrackerNode(Node):
     # -- inputs --------------------------------------------------------------------------------
 
     def on_camera_info(self, msg: CameraInfo) -> None:
-        try:
-            camera = PinholeCamera.from_camera_info(msg.width, msg.height, msg.k, msg.d,
-                                                    msg.distortion_model)
-        except ValueError as err:
-            self.last_problem = f'camera_info rejected: {err}'
-            self.get_logger().warning(f'camera/camera_info rejected: {err}',
-                                      throttle_duration_sec=2.0)
-            return
+        camera = PinholeCamera.from_camera_info(msg.width, msg.height, msg.k, msg.d,
+                                                msg.distortion_model)  # ValueError: rejected
         if self.camera is None:
             self.get_logger().info(
                 f'camera_info: {camera.width}x{camera.height} px, f = {camera.focal_px:.1f} px, '
@@ -170,23 +157,17 @@ class BallTrackerNode(Node):
         self.camera = camera
 
     def on_image(self, msg: Image) -> None:
+        """Image in, point out; a ValueError rejects the image (warned by the guard)."""
         start = time.perf_counter()
         self.window.images += 1
-        if self.camera is None:
-            self.window.rejected += 1
-            self.last_problem = 'no camera_info yet'
-            self.get_logger().warning('camera/image_raw: no camera_info received yet: image '
-                                      'skipped', throttle_duration_sec=2.0)
-            return
         try:
+            if self.camera is None:
+                raise InputError('no camera_info', 'no camera_info received yet')
             bgr = image_to_bgr(msg)
             measurement = self.pipeline.process(bgr, self.camera)
-        except ValueError as err:
+        except ValueError:
             self.window.rejected += 1
-            self.last_problem = f'image rejected: {err}'
-            self.get_logger().warning(f'camera/image_raw: image skipped: {err}',
-                                      throttle_duration_sec=2.0)
-            return
+            raise
         if measurement is not None:
             point = PointStamped()
             point.header.stamp = msg.header.stamp
@@ -195,9 +176,8 @@ class BallTrackerNode(Node):
                                                            measurement.position)
             self.point_pub.publish(point)
             self.window.detections += 1
-            latency = self.get_clock().now() - Time.from_msg(msg.header.stamp,
-                                                             clock_type=self.get_clock().clock_type)
-            self.window.latency_s.append(latency.nanoseconds * 1e-9)
+            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            self.window.latency_s.append((self.get_clock().now().nanoseconds - stamp_ns) * 1e-9)
         if self.params['publish_debug_image']:
             self.debug_pub.publish(numpy_to_image(annotate(bgr, measurement), 'bgr8',
                                                   header=msg.header))
@@ -231,7 +211,8 @@ class BallTrackerNode(Node):
                 KeyValue(key='processing_mean_ms', value=stat(w.processing_s, 1e3)),
                 KeyValue(key='full_frame_searches',
                          value=str(self.pipeline.tracker.full_frame_searches)),
-                KeyValue(key='last_problem', value=self.last_problem),
+                KeyValue(key='last_problem', value='; '.join(
+                    f'{source}: {message}' for source, message in self.problems.last.items())),
             ])
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()

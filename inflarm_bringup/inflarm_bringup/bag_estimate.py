@@ -6,17 +6,23 @@ Usage::
                          [--link-length 0.6] [--spring-offset 0.03]
 
 Reads every sensor_msgs/JointState on ``--topic`` of the rosbag2 bag BAG (sqlite3 or MCAP, as
-``bag_recorder`` writes), takes the positions and efforts (load torques) of joint_1..joint_3 by
-name, estimates all samples in one vectorized call (``estimate_load_and_pose_batch``, Fig. 5 of
-000_ce37cf035a0a87c6) and writes one CSV row per sample:
+``bag_recorder`` writes), takes the positions and efforts of joint_1..joint_3 by name and
+estimates the samples in the order of their time stamps with one ``LoadTracker`` (Fig. 5 of
+000_ce37cf035a0a87c6, following the branch of solutions continuous in time), writing one CSV
+row per sample:
 
     time_s, force_x_n, force_y_n, force_z_n, q_k1_rad .. q_k4_rad, tip_x_m, tip_y_m, tip_z_m,
     converged
 
+Sign: ``effort`` is the torque each motor applies (the ros2_control convention of
+``joint_states``), and the estimator takes the paper's tau_m of eq. (6), the torque the load
+exerts about the motor axis: the tool uses ``tau_m = -effort``.
+
 ``time_s`` is the sample's header stamp (the bag's record time when the stamp is zero); the
-estimates are NaN where ``converged`` is 0. Samples without the three joints, or with
-non-finite values, are skipped and counted. Prints a summary (samples, converged, mean force).
-Exit status: 0 on success, 1 on an unreadable bag or no usable sample, 2 on bad arguments.
+estimates are NaN where ``converged`` is 0 (no estimate, or several loads fit the torques).
+Samples without the three joints, or with non-finite values, are skipped and counted. Prints a
+summary (samples, converged, mean force). Exit status: 0 on success, 1 on an unreadable bag or
+no usable sample, 2 on bad arguments.
 """
 
 import argparse
@@ -27,7 +33,7 @@ import sys
 
 import numpy as np
 
-from inflarm_estimation.elastostatic import estimate_load_and_pose_batch
+from inflarm_estimation.elastostatic import LoadTracker
 from inflarm_hw.bag import bag_info, deserialize, normalize_topic, read_messages
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import MEAN_STIFFNESS
@@ -53,7 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
     """Command-line parser of ``inflarm-estimate-bag``."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Estimate the tip load and the link deflections of the '
-                               'inflatable arm from the joint states recorded in a bag.')
+                               'inflatable arm from the joint states recorded in a bag.',
+        epilog='effort is read as the torque each motor applies (ros2_control): the load '
+               'torque of eq. (6) is taken as tau_m = -effort.')
     parser.add_argument('bag', help='rosbag2 directory (sqlite3 or MCAP)')
     parser.add_argument('--out', required=True, metavar='CSV', help='CSV file to write')
     parser.add_argument('--topic', default='joint_states',
@@ -69,8 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def read_motor_samples(bag: str, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Times [s], motor angles (N, 3) [rad] and torques (N, 3) [N·m] on ``topic``, and the
-    number of samples skipped for missing joints or non-finite values.
+    """Times [s], motor angles (N, 3) [rad] and load torques tau_m = -effort (N, 3) [N·m] on
+    ``topic``, in time order, and the number of samples skipped for missing joints or
+    non-finite values.
 
     Raises
     ------
@@ -92,7 +101,8 @@ def read_motor_samples(bag: str, topic: str) -> tuple[np.ndarray, np.ndarray, np
             skipped += 1
             continue
         q = [msg.position[index[joint]] for joint in names]
-        tau = [msg.effort[index[joint]] for joint in names]
+        # effort is the torque each motor applies (ros2_control); tau_m of eq. 6 is its negative
+        tau = [-msg.effort[index[joint]] for joint in names]
         if not (np.isfinite(q).all() and np.isfinite(tau).all()):
             skipped += 1
             continue
@@ -100,8 +110,9 @@ def read_motor_samples(bag: str, topic: str) -> tuple[np.ndarray, np.ndarray, np
         times.append((stamp or message.timestamp_ns) * 1e-9)
         q_m.append(q)
         tau_m.append(tau)
-    return (np.array(times), np.array(q_m, dtype=float).reshape(-1, 3),
-            np.array(tau_m, dtype=float).reshape(-1, 3), skipped)
+    order = np.argsort(times, kind='stable')
+    return (np.array(times)[order], np.array(q_m, dtype=float).reshape(-1, 3)[order],
+            np.array(tau_m, dtype=float).reshape(-1, 3)[order], skipped)
 
 
 def write_estimates_csv(path: str, times: np.ndarray, estimates) -> None:
@@ -109,10 +120,10 @@ def write_estimates_csv(path: str, times: np.ndarray, estimates) -> None:
     with open(path, 'w', newline='', encoding='utf-8') as handle:
         writer = csv.writer(handle)
         writer.writerow(CSV_HEADER)
-        for i, t in enumerate(times):
-            values = [*estimates.force[i], *estimates.q_k[i], *estimates.tip_position[i]]
+        for t, estimate in zip(times, estimates, strict=True):
+            values = [*estimate.force, *estimate.q_k, *estimate.tip_position]
             writer.writerow([f'{t:.9f}', *(repr(float(v)) for v in values),
-                             int(estimates.converged[i])])
+                             int(estimate.converged)])
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -135,14 +146,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ValueError(f'no {args.topic} sample with positions and efforts of '
                              f'{list(FlexibleArm.MOTOR_JOINT_NAMES)} in {args.bag} '
                              f'({skipped} skipped)')
-        estimates = estimate_load_and_pose_batch(arm, q_m, tau_m, stiffness)
+        tracker = LoadTracker(arm, stiffness)
+        estimates = [tracker.update(q, tau) for q, tau in zip(q_m, tau_m, strict=True)]
         write_estimates_csv(args.out, times, estimates)
     except (OSError, ValueError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)
         return 1
-    converged = int(estimates.converged.sum())
-    mean = (np.mean(estimates.force[estimates.converged], axis=0) if converged
-            else np.full(3, math.nan))
+    forces = [e.force for e in estimates if e.converged]
+    converged = len(forces)
+    mean = np.mean(forces, axis=0) if converged else np.full(3, math.nan)
     print(f'{len(times)} samples ({skipped} skipped), {converged} converged; mean force '
           f'[{mean[0]:.3f}, {mean[1]:.3f}, {mean[2]:.3f}] N; wrote {args.out}')
     return 0

@@ -4,7 +4,7 @@ Section 3.3: the end moves from (0, 0, 604) mm to (100, 110, 670) mm, 30 times. 
 memory (PID alone); every later trial uses the memory learned by the one before. Fig 7 compares
 x, y, z against time for trials 1 and 30, Fig 8 the RMSE per trial and axis.
 
-Run ``python -m inflarm_control.sra_experiments --out DIR`` to write into ``DIR``:
+Run ``inflarm-sra-experiments --out DIR`` to write into ``DIR``:
 
 - ``fig7_trajectories.png``: x, y, z [mm] against time [s], trials 1 and 30, target dashed;
 - ``fig8_rmse.png``: RMSE [mm] per trial and axis;
@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams, TrialResults, run_trials
+from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 
 FIG7_START = (0.0, 0.0, 0.604)
 """Initial point of section 3.3 in ``sra_mount`` [m]."""
@@ -86,9 +87,6 @@ def run_experiment(
     -------
     SraExperiment
     """
-    # the simulated plant lives in the hardware package; imported only for the experiment
-    from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
-
     plant = SoftArmPlant(1, SoftArmPlantParams(noise_std=noise_std),
                          np.random.default_rng(seed))
     controller = PidIlcController(1, params if params is not None else PidIlcParams())

@@ -1,7 +1,7 @@
 """inflarm-build-knowledge: builds a full-grid database a controller can open, reports failures."""
 
+from inflarm_bringup.knowledge_cli import main
 from inflarm_control.knowledge import KnowledgeDatabase, nearest_knowledge_point
-from inflarm_control.knowledge_cli import main
 
 
 def test_builds_a_database_for_every_knowledge_point(tmp_path, capsys):

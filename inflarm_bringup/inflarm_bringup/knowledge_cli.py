@@ -1,6 +1,7 @@
 """``inflarm-build-knowledge OUT``: build the experiential knowledge database (3.2 of 001_).
 
-Runs the learning trials against the simulated plant for every knowledge point of the 1 cm grid
+Runs the learning trials against the simulated plant (``inflarm_hw.sra_plant``) for every
+knowledge point of the 1 cm grid
 (67,200 points; about 1.5 min on two cores) and writes the memory-mapped database to OUT, which
 the pressure controller's ``knowledge_db_path`` parameter then reads. An interrupted build
 resumes where it stopped.
@@ -10,6 +11,7 @@ import argparse
 import sys
 
 from inflarm_control.knowledge import build_knowledge_database
+from inflarm_hw.sra_plant import SoftArmPlant
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -22,8 +24,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--overwrite', action='store_true', help='start over if OUT exists')
     args = parser.parse_args(argv)
     try:
-        db = build_knowledge_database(args.out, n_trials=args.trials, workers=args.workers,
-                                      overwrite=args.overwrite)
+        db = build_knowledge_database(args.out, plant_factory=SoftArmPlant, n_trials=args.trials,
+                                      workers=args.workers, overwrite=args.overwrite)
     except (OSError, ValueError) as err:
         print(f'inflarm-build-knowledge: {err}', file=sys.stderr)
         return 1

@@ -1,0 +1,79 @@
+"""sensor_msgs/JointState <-> arrays of the inflatable arm's joints, checked against the joint
+table (``inflarm_model.urdf.JOINT_LIMITS``): the one place nodes read and write joint messages.
+"""
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+from sensor_msgs.msg import JointState
+
+from inflarm_model.urdf import check_joint_positions
+from inflarm_msgs_json.ros.problems import InputError
+
+
+def joint_arrays(msg: JointState, names: Sequence[str], fields: Sequence[str] = ('position',),
+                 optional: Sequence[str] = ()) -> dict[str, npt.NDArray[np.float64] | None]:
+    """The values of ``names``, in that order, for each of ``fields`` of a joint state.
+
+    Other joints in the message are ignored. Positions are checked against the joint limits.
+
+    Parameters
+    ----------
+    msg : sensor_msgs.msg.JointState
+    names : sequence of str
+        Joints to read, e.g. ``FlexibleArm.MOTOR_JOINT_NAMES``.
+    fields : sequence of str
+        Fields that must be there: ``'position'``, ``'velocity'``, ``'effort'``.
+    optional : sequence of str
+        Fields read when the message has them (one value per name), else None.
+
+    Returns
+    -------
+    dict
+        Field name -> ndarray of shape (len(names),) [rad, rad/s, N·m], or None.
+
+    Raises
+    ------
+    InputError
+        Naming the problem: a missing or repeated joint, a field of the wrong length, a value
+        that is not finite, a position outside its limits.
+    """
+    given = list(msg.name)
+    repeated = sorted({n for n in given if given.count(n) > 1})
+    if repeated:
+        raise InputError('repeated joint', f'joints {repeated} appear more than once')
+    missing = [n for n in names if n not in given]
+    if missing:
+        raise InputError('missing joint', f'expected joints {list(names)}, got {given}')
+    index = [given.index(n) for n in names]
+    arrays: dict[str, npt.NDArray[np.float64] | None] = {}
+    for field in (*fields, *optional):
+        values = getattr(msg, field)
+        if len(values) == 0 and field in optional:
+            arrays[field] = None
+            continue
+        if len(values) != len(given):
+            raise InputError('array length', f'{len(given)} joint names but {len(values)} '
+                                             f'{field} values')
+        array = np.array([values[i] for i in index], dtype=float)
+        if not np.isfinite(array).all():
+            raise InputError('not finite', f'{field} of {list(names)} is {array.tolist()}')
+        arrays[field] = array
+    if arrays.get('position') is not None:
+        try:
+            check_joint_positions(names, arrays['position'])
+        except ValueError as error:
+            raise InputError('joint limit', str(error)) from error
+    return arrays
+
+
+def joint_state(names: Sequence[str], stamp=None, **fields: npt.ArrayLike) -> JointState:
+    """A joint state of ``names`` with the given fields (position, velocity, effort)."""
+    msg = JointState(name=list(names))
+    if stamp is not None:
+        msg.header.stamp = stamp
+    for field, values in fields.items():
+        if values is not None:
+            setattr(msg, field, [float(v) for v in np.asarray(values, dtype=float)])
+    return msg

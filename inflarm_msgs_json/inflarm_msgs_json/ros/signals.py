@@ -1,0 +1,144 @@
+"""Stop requests from SIGINT and SIGTERM, owned by inflarm from the first moment of a process.
+
+rclpy's own handlers shut the context down asynchronously, from inside whatever call is in
+flight, so an rcl call that races them fails (``failed to initialize wait set``, ``Failed to
+publish: publisher's context is invalid``; ros2/rclpy#398); and a Ctrl-C that arrives while the
+node's modules import is lost or ends in a traceback. Instead, every node executable:
+
+1. installs these handlers first (its entry point, `node_entry`, imports nothing slow before),
+   then unblocks SIGINT and SIGTERM -- a parent that must not lose a stop request starts its
+   children with both blocked (see ``scripts/inflarm_launch.py``), so one sent before the
+   handlers exist waits for them instead of killing the interpreter;
+2. while it imports its node module, a stop request aborts the import (`StartupInterrupted`)
+   and the process exits 0 at once;
+3. from then on a stop request only sets a flag and calls the registered wake-ups (the
+   executor's guard condition) from a watcher thread woken through ``signal.set_wakeup_fd``,
+   since the main thread may be blocked in rcl's wait (see ``inflarm_msgs_json.ros.spin``); the
+   spin loop returns between callbacks and the node is destroyed in order.
+
+Stdlib only: this module must stay cheap to import.
+"""
+
+from collections.abc import Callable
+import faulthandler
+import importlib
+import os
+import signal
+import sys
+import threading
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+STACKS_SIGNAL = signal.SIGUSR1  # prints every thread's stack to stderr: why a node hangs
+
+_stop = threading.Event()
+_lock = threading.Lock()
+_wakeups: list[Callable[[], None]] = []
+_abort_startup = False
+_installed = False
+
+
+class StartupInterrupted(BaseException):
+    """Raised into the start-up imports when a stop request arrives (a BaseException, so that
+    library code catching ``Exception`` does not swallow it)."""
+
+
+def _on_signal(signum: int, frame) -> None:
+    global _abort_startup
+    _stop.set()
+    if _abort_startup:
+        _abort_startup = False  # once: a second signal must not interrupt the exit
+        raise StartupInterrupted(signal.Signals(signum).name)
+
+
+def _watch_signals(read_fd: int) -> None:
+    """Run the wake-ups as soon as a stop signal arrives.
+
+    The Python-level handler above runs only when the main thread next executes bytecode, which
+    a thread blocked in rcl's wait does not; the interpreter's C-level handler writes the signal
+    number to the wake-up fd at once, and this thread reads it.
+    """
+    stop_numbers = {int(s) for s in STOP_SIGNALS}
+    while True:
+        try:
+            received = os.read(read_fd, 64)
+        except OSError:
+            return
+        if stop_numbers.intersection(received):
+            _stop.set()
+            _run_wakeups()
+
+
+def _run_wakeups() -> None:
+    with _lock:
+        wakeups = list(_wakeups)
+    for wakeup in wakeups:
+        wakeup()
+
+
+def install_stop_handlers() -> None:
+    """Own SIGINT and SIGTERM from now on (idempotent; main thread only), then unblock them.
+
+    A signal that was blocked and is pending is delivered right here, to the new handler.
+    """
+    global _installed
+    if not _installed:
+        read_fd, write_fd = os.pipe()
+        os.set_blocking(write_fd, False)
+        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+        threading.Thread(target=_watch_signals, args=(read_fd,), name='stop-signals',
+                         daemon=True).start()
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, _on_signal)
+        faulthandler.register(STACKS_SIGNAL, all_threads=True)
+        _installed = True
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+
+
+def stop_requested() -> bool:
+    """Whether SIGINT or SIGTERM has arrived (or `request_stop` was called)."""
+    return _stop.is_set()
+
+
+def request_stop() -> None:
+    """Ask the process to stop, as a signal would (for in-process callers)."""
+    _stop.set()
+    _run_wakeups()
+
+
+def add_wakeup(callback: Callable[[], None]) -> None:
+    """Call ``callback`` (from a helper thread) when a stop is requested; at once if it was."""
+    with _lock:
+        _wakeups.append(callback)
+    if _stop.is_set():
+        callback()
+
+
+def remove_wakeup(callback: Callable[[], None]) -> None:
+    with _lock:
+        if callback in _wakeups:
+            _wakeups.remove(callback)
+
+
+def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
+    """A console-script entry point that owns the stop signals before it imports ``module``.
+
+    ``setup.py`` names these (``'sra_sim = inflarm_hw.executables:sra_sim'``) instead of the
+    node module itself, whose imports (rclpy, numpy, Pinocchio) take about a second.
+    """
+    def entry() -> None:
+        global _abort_startup
+        _abort_startup = True
+        try:
+            install_stop_handlers()
+            main = getattr(importlib.import_module(module), function)
+        except StartupInterrupted:
+            sys.exit(0)
+        finally:
+            _abort_startup = False
+        if stop_requested():
+            sys.exit(0)
+        main()
+
+    entry.__name__ = entry.__qualname__ = module.rsplit('.', 1)[-1]
+    entry.__doc__ = f'Run {module}.{function}() with the stop signals owned from the start.'
+    return entry

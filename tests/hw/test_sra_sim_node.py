@@ -1,0 +1,66 @@
+"""sra_sim in-process: commands within the chamber limits, rejection of bad ones, the vent."""
+
+import numpy as np
+import rclpy
+from rclpy.parameter import Parameter
+from std_msgs.msg import String
+
+from inflarm_hw.nodes.sra_sim import SraSim
+from inflarm_msgs_json import ChamberPressures, PressureCommand, decode
+from inflarm_msgs_json.ros.conversions import to_string_msg
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS
+from ros_harness import spin_until
+
+
+class Rig:
+    def __init__(self, executor, **overrides) -> None:
+        self.executor = executor
+        self.sim = SraSim(context=executor.context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in overrides.items()])
+        self.probe = rclpy.create_node('probe', context=executor.context)
+        self.pressures: list[ChamberPressures] = []
+        self.probe.create_subscription(String, 'chamber_pressures',
+                                       lambda m: self.pressures.append(decode(m.data)),
+                                       RELIABLE_QOS)
+        self.command_pub = self.probe.create_publisher(String, 'chamber_pressure_command',
+                                                       COMMAND_QOS)
+        executor.add_node(self.sim)
+        executor.add_node(self.probe)
+        assert spin_until(executor, lambda: self.command_pub.get_subscription_count() == 1)
+
+    def command(self, chambers: dict) -> None:
+        self.command_pub.publish(to_string_msg(PressureCommand(chambers=chambers)))
+
+    def spin(self, seconds: float) -> None:
+        spin_until(self.executor, lambda: False, timeout_s=seconds)
+
+
+def test_an_unknown_chamber_is_rejected_and_the_node_keeps_running(executor):
+    rig = Rig(executor)
+    rig.command({'B9': 10e3})
+    assert spin_until(executor, lambda: 'chamber_pressure_command' in rig.sim.problems.last)
+    assert "unknown chambers ['B9']" in rig.sim.problems.last['chamber_pressure_command']
+    assert rig.sim.problems.unexpected == 0
+    rig.command({'PEA': 10e3})
+    assert spin_until(executor, lambda: rig.sim.command[0] == 10e3)
+
+
+def test_a_pressure_beyond_the_chamber_maximum_is_rejected_whole(executor):
+    rig = Rig(executor)
+    rig.command({'PEA': 1e300, 'B1': 5e3})
+    assert spin_until(executor, lambda: 'chamber_pressure_command' in rig.sim.problems.last)
+    assert 'PEA at 1e+300 Pa is outside 0..100000 Pa' in \
+        rig.sim.problems.last['chamber_pressure_command']
+    np.testing.assert_array_equal(rig.sim.command, 0.0)  # B1 was not applied either
+    rig.spin(0.5)
+    assert max(rig.pressures[-1].as_dict().values()) == 0.0
+
+
+def test_a_silent_controller_gets_the_chambers_vented_and_the_timeout_stays_safe(executor):
+    rig = Rig(executor, cmd_timeout_s=0.3)
+    refused = rig.sim.set_parameters([Parameter('cmd_timeout_s', value=600.0)])[0]
+    assert not refused.successful  # minutes are no fail-safe
+    rig.command({'PEA': 30e3})
+    assert spin_until(executor, lambda: rig.sim.command[0] == 30e3)
+    assert spin_until(executor, lambda: rig.sim.vented and rig.sim.command[0] == 0.0,
+                      timeout_s=3.0)

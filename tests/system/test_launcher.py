@@ -1,0 +1,36 @@
+"""The launcher's process group: a node that dies or hangs is reported with its last lines."""
+
+import io
+import os
+import sys
+
+import pytest
+
+from inflarm_launch import NodeProcess, ProcessGroup
+from ros_harness import wait_until
+
+pytestmark = pytest.mark.system
+
+
+def test_a_node_that_dies_is_reported_with_its_exit_code_and_last_lines(domain_id, capsys):
+    output = io.StringIO()
+    group = ProcessGroup(dict(os.environ, ROS_DOMAIN_ID=str(domain_id)), output=output)
+    group.start('bag_recorder', NodeProcess('inflarm_hw', 'bag_recorder').command())
+    assert wait_until(lambda: group.first_exited() == 'bag_recorder', 20.0)
+    assert group.stop(grace_s=5.0) == {'bag_recorder': 1}
+    report = group.describe('bag_recorder', 'exited with code 1')
+    assert report.startswith('[launch] bag_recorder exited with code 1; its last output:')
+    assert "cannot start: parameter 'topics' is required" in report
+    assert 'Traceback' not in output.getvalue()
+
+
+def test_a_node_that_hangs_is_killed_and_reported(domain_id, capsys):
+    group = ProcessGroup(dict(os.environ, ROS_DOMAIN_ID=str(domain_id)), output=io.StringIO())
+    hang = ('import signal, sys, time; signal.pthread_sigmask(signal.SIG_UNBLOCK, '
+            '{signal.SIGINT}); signal.signal(signal.SIGINT, signal.SIG_IGN); '
+            "print('stuck', flush=True); time.sleep(60)")
+    group.start('stuck', [sys.executable, '-c', hang])
+    assert wait_until(lambda: 'stuck' in ''.join(group.last_lines['stuck']), 20.0)
+    codes = group.stop(grace_s=0.5)
+    assert codes['stuck'] < 0  # killed
+    assert '[launch] stuck did not stop within 0.5 s of SIGINT: killed' in capsys.readouterr().err
