@@ -320,7 +320,7 @@ CAMERA = PinholeCamera.ideal(320, 240, 450.0)
 
 
 def _camera_image():
-    """The ball at the soft arm's rest point, as ball_tracker's default camera sees it."""
+    """The ball at the soft arm's rest point, seen from ball_tracker's default camera pose."""
     pose = RigidTransform.from_quaternion([0.0, -1.1, 0.78], [0.0, 0.70710678, 0.70710678, 0.0])
     frame = SyntheticCamera(CAMERA, pose).render(np.array([0.0, 0.0, 0.604]))
     return numpy_to_image(frame.image, 'bgr8')
