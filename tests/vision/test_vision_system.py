@@ -1,6 +1,7 @@
 """The camera path as real processes over DDS: sra_sim renders camera/image_raw, ball_tracker
 publishes ball_position; compared with end_point_truth at the image stamps while the arm moves."""
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
@@ -9,7 +10,7 @@ from std_msgs.msg import String
 
 from inflarm_msgs_json import PressureCommand
 from inflarm_msgs_json.ros.conversions import to_string_msg
-from inflarm_msgs_json.ros.qos import COMMAND_QOS, SENSOR_QOS
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
 from ros_harness import spin_until
 
 pytestmark = pytest.mark.system
@@ -29,6 +30,10 @@ def test_ball_position_from_the_camera_follows_the_true_end_point(node_processes
     truth: list[PointStamped] = []
     probe.create_subscription(PointStamped, 'ball_position', points.append, SENSOR_QOS)
     probe.create_subscription(PointStamped, 'end_point_truth', truth.append, SENSOR_QOS)
+    diagnostics: list[dict] = []
+    probe.create_subscription(
+        DiagnosticArray, 'diagnostics',
+        lambda m: diagnostics.append({v.key: v.value for v in m.status[0].values}), RELIABLE_QOS)
     command_pub = probe.create_publisher(String, 'chamber_pressure_command', COMMAND_QOS)
     executor.add_node(probe)
     assert spin_until(executor, lambda: len(points) >= 2, timeout_s=30.0), \
@@ -40,8 +45,10 @@ def test_ball_position_from_the_camera_follows_the_true_end_point(node_processes
 
     def moving() -> bool:
         command_pub.publish(command)
-        return len(points) >= start + 25
-    assert spin_until(executor, moving, timeout_s=30.0), node_processes.output()
+        return len(points) >= start + 20
+    # 5 images a second; best-effort 0.9 MB images over UDP lose some under load
+    assert spin_until(executor, moving, timeout_s=45.0), (diagnostics[-5:],
+                                                           node_processes.output())
 
     t_truth = np.array([stamp_s(m) for m in truth])
     p_truth = np.array([[m.point.x, m.point.y, m.point.z] for m in truth])

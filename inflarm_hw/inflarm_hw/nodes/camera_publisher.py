@@ -5,7 +5,9 @@
 
     camera/image_raw (sensor_msgs/Image, bgr8, SENSOR_QOS): stamped with the capture time,
         published ``camera.latency_s`` later.
-    camera/camera_info (sensor_msgs/CameraInfo, SENSOR_QOS): the intrinsics, same stamp.
+    camera/camera_info (sensor_msgs/CameraInfo, SENSOR_QOS): the intrinsics, same stamp,
+        published right after the image (as image_transport's CameraPublisher does; published
+        before it, a subscriber to both received half the images over UDP in a test here).
 
 Frames are captured at the node's ``camera_rate_hz`` and only while ``camera/image_raw`` has a
 subscriber (rendering costs about 10-20 ms a frame at 640x480).
@@ -138,5 +140,5 @@ class CameraPublisher:
         self._pending.append(holder[0])
 
     def publish(self, image: Image, info: CameraInfo) -> None:
-        self.info_pub.publish(info)
         self.image_pub.publish(image)
+        self.info_pub.publish(info)
