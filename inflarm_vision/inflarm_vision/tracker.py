@@ -218,13 +218,17 @@ def _median(values: npt.NDArray) -> float:
     return 0.5 * float(part[(n - 1) // 2] + part[n // 2])
 
 
-def _ball_colour(patch: npt.NDArray[np.uint8], blob: npt.NDArray[np.uint8]) -> npt.NDArray:
+def _ball_colour(patch: npt.NDArray[np.uint8],
+                 blob: npt.NDArray[np.uint8]) -> npt.NDArray | None:
     """BGR colour of the ball: the median direction (shading does not change it) of the blob's
     pixels away from its edge (no background mixed in), unclipped and without the brightest
-    quarter (highlights), scaled to their median length (at most 400 pixels are used)."""
+    quarter (highlights), scaled to their median length (at most 400 pixels are used). None
+    for a blob of fewer than 3 pixels."""
     core = cv2.erode(blob, np.ones((3, 3), np.uint8))
     inside = core if cv2.countNonZero(core) >= 8 else blob
     pixels = patch[inside > 0]
+    if len(pixels) < 3:
+        return None
     pixels = pixels[::max(1, len(pixels) // 400)]
     unclipped = pixels[pixels.max(axis=1) < _SATURATED]
     pixels = (unclipped if len(unclipped) >= 4 else pixels).astype(np.float64)
@@ -399,13 +403,14 @@ def _refine_blob(image: npt.NDArray[np.uint8], patch: npt.NDArray[np.uint8],
 
 
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
-               ball_bgr: npt.NDArray[np.float64], params: DetectorParams,
+               ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
                margin_px: float = 0.0, sigma: float | None = None) -> BallDetection | None:
     """Sub-pixel outline of a ball of colour ``ball_bgr`` near ``center`` with a radius near
     ``r0`` [px]: rays from ``center``, their edges (`_edges`, searched within
     ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust ellipse fit (`_fit_outline`). None if
-    the colour is too grey or the inside of the outline is not of that colour."""
-    if np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma, 1.0):
+    the colour is unknown or too grey, or the inside of the outline is not of that colour."""
+    if ball_bgr is None or np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma,
+                                                                             1.0):
         return None
     blind, chroma = _channels(ball_bgr)
     n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
