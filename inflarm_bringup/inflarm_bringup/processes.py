@@ -5,7 +5,8 @@ started and stopped together. What ``ros2 run`` and ``ros2 launch`` do, for this
   files first, then the node's installed ``config/<exe>.yaml``, then the system's file, then the
   overrides (written as a file keyed by the node's name: a ``-p`` given after a ``/**`` file loses
   to the node's own YAML, an rcl subtlety).
-- `ros_environment` keeps DDS on this machine with fast discovery and the UDP transport.
+- `ros_environment` keeps DDS on this machine, with fast discovery and shared memory large
+  enough for camera images (``config/fastdds_profile.xml``).
 - `start_node_process` starts one with SIGINT and SIGTERM blocked until the node owns them
   (``inflarm_msgs_json.ros.signals``): a stop request at any moment is never lost.
 - `ProcessGroup` relays their output prefixed by name, keeps each one's last lines, and stops
@@ -108,7 +109,9 @@ _overrides_dir: pathlib.Path | None = None
 
 
 def overrides_file(node_name: str, parameters: dict[str, object]) -> str:
-    """A parameter file setting ``parameters`` of the node ``node_name`` (kept until exit)."""
+    """A parameter file setting ``parameters`` of the node ``node_name`` in any namespace (kept
+    until this process exits). Its key is new to the node's parameter files, so rcl applies it
+    after them."""
     global _overrides_dir
     if _overrides_dir is None:
         _overrides_dir = pathlib.Path(tempfile.mkdtemp(prefix='inflarm-parameters-'))
@@ -116,12 +119,13 @@ def overrides_file(node_name: str, parameters: dict[str, object]) -> str:
     values = {k: list(v) if isinstance(v, tuple) else v for k, v in parameters.items()}
     handle, path = tempfile.mkstemp(prefix=f'{node_name}-', suffix='.yaml', dir=_overrides_dir)
     with os.fdopen(handle, 'w') as file:
-        yaml.safe_dump({node_name: {'ros__parameters': values}}, file)
+        yaml.safe_dump({f'/**/{node_name}': {'ros__parameters': values}}, file)
     return path
 
 
 def ros_environment(base: dict[str, str] | None = None) -> dict[str, str]:
-    """The environment nodes run in: local discovery, fast announcements, UDP transport.
+    """The environment nodes run in: local discovery, fast announcements, shared memory with a
+    16 MB segment (and UDPv4), from ``config/fastdds_profile.xml``.
 
     Values already set by the user win; the defaults keep DDS traffic on this machine.
     """
@@ -129,8 +133,6 @@ def ros_environment(base: dict[str, str] | None = None) -> dict[str, str]:
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', config_path('inflarm_bringup',
                                                                  'fastdds_profile.xml'))
-    # Shared memory stalls on messages over ~512 KB (camera images); UDP does not.
-    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
     env['PYTHONUNBUFFERED'] = '1'
     return env
