@@ -131,8 +131,13 @@ def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
         try:
             install_stop_handlers()
             main = getattr(importlib.import_module(module), function)
-        except StartupInterrupted:
-            sys.exit(0)
+        except BaseException:
+            # Raised where the stop request found the import, it may arrive wrapped: a C
+            # extension whose initialisation it interrupted reports "ImportError:
+            # initialization failed".
+            if stop_requested():
+                sys.exit(0)
+            raise
         finally:
             _abort_startup = False
         if stop_requested():
