@@ -22,13 +22,13 @@ import timeit
 
 import numpy as np
 
+from inflarm_bringup.knowledge_cli import knowledge_plant
 from inflarm_control.knowledge import (
     DEFAULT_GRID,
     KnowledgeDatabase,
     build_knowledge_database,
     nearest_knowledge_point,
 )
-from inflarm_hw.sra_plant import SoftArmPlant
 
 LOOKUP_TARGET_US = 10.0
 OPEN_TARGET_MS = 50.0
@@ -116,7 +116,7 @@ def bench_full_build(tmp: Path, batch_size: int | None, workers: int) -> None:
     path = tmp / 'built.db'
     kwargs = {} if batch_size is None else {'batch_size': batch_size}
     t0 = time.perf_counter()
-    db = build_knowledge_database(path, plant_factory=SoftArmPlant, progress=True,
+    db = build_knowledge_database(path, plant_factory=knowledge_plant, progress=True,
                                   workers=workers, **kwargs)
     wall = time.perf_counter() - t0
     print(

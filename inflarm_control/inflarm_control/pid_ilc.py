@@ -550,9 +550,11 @@ class TrialResults:
     times : ndarray, shape (steps + 1,)
         Sample times from the start of each trial [s]; sample ``k`` is taken before command ``k``.
     trajectories : ndarray, shape (n_trials, steps + 1, n, 3) or None
-        Measured end points per trial, sample and task in ``sra_mount`` [m] (None if not kept).
+        Measured end points per trial, sample and task in ``sra_mount`` [m], NaN where the
+        measurement dropped out (None if not kept).
     rmse : ndarray, shape (n_trials, n, 3)
-        Root-mean-square of ``zeta_e - zeta_d`` over all samples of a trial, per axis [m] (Fig 8).
+        Root-mean-square of ``zeta_e - zeta_d`` over the measured samples of a trial, per axis
+        [m] (Fig 8).
     reach_time : ndarray, shape (n_trials, n, 3)
         Per axis, the first sample time after which the measured coordinate stays within
         ``tolerance`` of the target until the end of the trial [s]; ``inf`` if it is outside at
@@ -595,7 +597,10 @@ def run_trials(
     ----------
     plant : SoftArmPlant-like
         Object with ``n``, ``reset(end_point=...)``, ``chamber_pressures``, ``measure()`` and
-        ``step(command, dt)`` (e.g. ``inflarm_hw.sra_plant.SoftArmPlant``).
+        ``step(command, dt)`` (e.g. ``inflarm_hw.sra_plant.SoftArmPlant``). A row of NaN from
+        ``measure()`` is a vision dropout of that task: the controller holds and learns nothing
+        from the step (``PidIlcController.step(..., valid)``), and the sample counts in neither
+        RMSE nor reach time.
     controller : PidIlcController
         Controller with the same ``n`` as the plant.
     start, target : array-like, shape (3,) or (n, 3)
@@ -643,9 +648,11 @@ def run_trials(
             y = plant.measure()
             if trajectories is not None:
                 trajectories[t, k] = y
-            metrics.add(y, times[k])
+            valid = np.isfinite(y).all(axis=-1)
+            valid = None if valid.all() else valid  # a NaN row: that task's dropout
+            metrics.add(y, times[k], valid)
             if k < steps:
-                plant.step(controller.step(y, dt), dt)
+                plant.step(controller.step(y, dt, valid), dt)
         memory = controller.finish_trial()
         rmse[t] = metrics.rmse
         reach[t] = metrics.reach_time

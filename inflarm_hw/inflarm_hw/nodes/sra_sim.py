@@ -6,16 +6,21 @@ Subscribes:
 Publishes:
     chamber_pressures (std_msgs/String: ChamberPressures JSON, RELIABLE_QOS): measured [Pa].
     end_point_truth (geometry_msgs/PointStamped, SENSOR_QOS): true end point [m], for evaluation.
-    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the end point as the camera measures
-        it (with noise), when ``publish_ball_position`` is true.
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the true end point plus
+        ``measurement_noise_m`` of noise, a stand-in for camera + tracker, only when
+        ``publish_ball_position`` is true (default false: ``ball_tracker`` measures the ball
+        in the camera images).
     camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
         SENSOR_QOS: the simulated external camera's view of the yellow ball at the true end
         point, at ``camera_rate_hz``, when ``camera.enabled`` and while someone subscribes
         (``inflarm_hw.nodes.camera_publisher``).
 Parameters:
     physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates.
-    publish_ball_position (bool): publish the simulated measurement on ``ball_position``.
-    measurement_noise_m (double): camera noise per axis [m].
+    publish_ball_position (bool, read-only): publish the stand-in measurement on
+        ``ball_position`` (default false).
+    measurement_noise_m (double): its noise per axis [m].
+    valve_delay_s (double, read-only): transport delay from a command to the valve outputs
+        [s] (`inflarm_hw.sra_plant.SoftArmPlantParams.valve_delay`).
     cmd_timeout_s (double, 0.05-5): without a command for this long the MCU vents every chamber.
     max_chamber_pressure_pa (double, read-only): commands above this are rejected whole.
     frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
@@ -41,6 +46,7 @@ from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
+_PLANT = SoftArmPlantParams()
 PARAMETERS = (
     Parameter('physics_rate_hz', 50.0, 'simulation step rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
@@ -48,9 +54,14 @@ PARAMETERS = (
               range=(0.1, 1000.0), read_only=True),
     Parameter('camera_rate_hz', 5.0, 'simulated camera rate [Hz] (paper: about 5 Hz)',
               range=(0.1, 100.0), read_only=True),
-    Parameter('publish_ball_position', True,
-              'publish the simulated camera measurement on ball_position', read_only=True),
-    Parameter('measurement_noise_m', 0.0005, 'camera noise per axis [m]', range=(0.0, 0.05)),
+    Parameter('publish_ball_position', False,
+              'publish the true end point plus noise on ball_position (a stand-in for the '
+              'camera and ball_tracker)', read_only=True),
+    Parameter('measurement_noise_m', _PLANT.noise_std,
+              'noise per axis of the stand-in ball_position [m]', range=(0.0, 0.05)),
+    Parameter('valve_delay_s', _PLANT.valve_delay,
+              'transport delay from a command to the valve outputs [s]', range=(0.0, 2.0),
+              read_only=True),
     Parameter('cmd_timeout_s', 2.0, 'vent every chamber after this long without a command [s]',
               range=(0.05, 5.0)),
     Parameter('max_chamber_pressure_pa', CHAMBER_MAX_PRESSURE,
@@ -69,7 +80,8 @@ class SraSim(GuardedCallbacks, Node):
         self.params = declare_parameters(self, PARAMETERS)
         seed = self.params['seed']
         self.plant = SoftArmPlant(
-            n=1, params=SoftArmPlantParams(noise_std=self.params['measurement_noise_m']),
+            n=1, params=SoftArmPlantParams(noise_std=self.params['measurement_noise_m'],
+                                           valve_delay=self.params['valve_delay_s']),
             rng=np.random.default_rng(None if seed < 0 else seed))
         self.command = np.zeros(len(CHAMBERS))
         self.last_command_time = time.monotonic()
