@@ -25,7 +25,9 @@ Publishes:
 Parameters:
     plant (string, read-only): 'arm', 'sra' or 'both'.
     device, link (string, read-only): the tty to use, or the symlink to make to the new pty.
-    rate_hz (double, read-only): physics and State report rate; io_rate_hz: line poll rate.
+    rate_hz (double, read-only): physics and State report rate (each step integrates the
+        wall-clock time since the previous one, ``inflarm_hw.realtime``); io_rate_hz: line poll
+        rate.
     protocol_version (int, read-only): the protocol it speaks (test an incompatible MCU).
     watchdog_default_s (double, read-only): command watchdog when HELLO asks for 0.
     arm.* (inflarm_model.nodes.arm_parameters), tip_force_n (runtime),
@@ -59,6 +61,7 @@ from inflarm_hw.nodes.plant_parameters import (
     arm_plant_from_parameters,
     check_arm_plant_parameters,
 )
+from inflarm_hw.realtime import ElapsedSteps
 from inflarm_hw.sim_mcu import McuPort, SimMcu, SimMcuParams
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.kinematics import FlexibleArm
@@ -140,6 +143,12 @@ class SimMcuNode(GuardedCallbacks, Node):
         self.mcu = SimMcu(arm, sra, p['arm.link_pressure_pa'], SimMcuParams(
             protocol_version=p['protocol_version'], default_watchdog_s=p['watchdog_default_s'],
             pressure_noise_pa=p['noise.pressure_pa']), rng)
+        self.camera = None
+        if sra is not None and p['camera.enabled']:
+            # before the port: building the renderer takes a while, and a bridge may send
+            # HELLO as soon as the port is printed
+            self.camera = CameraPublisher(self, p, lambda: self.mcu.sra.end_point[0],
+                                          None if seed < 0 else seed)
         self.port = McuPort(p['device'], p['link'])
         print(f'sim_mcu: serial port {self.port.path}', flush=True)
 
@@ -153,11 +162,8 @@ class SimMcuNode(GuardedCallbacks, Node):
             if p['publish_ball_position']:
                 self.ball_pub = self.create_publisher(PointStamped, 'ball_position', SENSOR_QOS)
                 self.create_guarded_timer(1.0 / p['camera_rate_hz'], self.publish_camera)
-        self.camera = None
-        if sra is not None and p['camera.enabled']:
-            self.camera = CameraPublisher(self, p, lambda: self.mcu.sra.end_point[0],
-                                          None if seed < 0 else seed)
         self.dt = 1.0 / p['rate_hz']
+        self.elapsed = ElapsedSteps(max_step_s=1.0)  # physics keep pace with the wall clock
         self.create_guarded_timer(1.0 / p['io_rate_hz'], self.poll)
         self.create_guarded_timer(self.dt, self.step)
         self.create_guarded_timer(1.0 / p['truth_rate_hz'], self.publish_truth)
@@ -199,7 +205,9 @@ class SimMcuNode(GuardedCallbacks, Node):
             self.port.write(self.mcu.receive(data, time.monotonic()))
 
     def step(self) -> None:
-        self.port.write(self.mcu.step(self.dt, time.monotonic()))
+        dt = self.elapsed()
+        if dt > 0.0:
+            self.port.write(self.mcu.step(dt, time.monotonic()))
 
     def point(self, point, frame_id: str) -> PointStamped:
         msg = PointStamped()

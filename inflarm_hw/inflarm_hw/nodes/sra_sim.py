@@ -15,7 +15,9 @@ Publishes:
         point, at ``camera_rate_hz``, when ``camera.enabled`` and while someone subscribes
         (``inflarm_hw.nodes.camera_publisher``).
 Parameters:
-    physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates.
+    physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates;
+        each physics step integrates the wall-clock time since the previous one
+        (``inflarm_hw.realtime``), so simulated time keeps pace with the controller's.
     publish_ball_position (bool, read-only): publish the stand-in measurement on
         ``ball_position`` (default false).
     measurement_noise_m (double): its noise per axis [m].
@@ -37,6 +39,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
+from inflarm_hw.realtime import ElapsedSteps
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
 from inflarm_msgs_json import ChamberPressures, PressureCommand
@@ -99,6 +102,9 @@ class SraSim(GuardedCallbacks, Node):
             self.create_guarded_timer(1.0 / self.params['camera_rate_hz'],
                                       self.publish_measurement)
         self.dt = 1.0 / self.params['physics_rate_hz']
+        # physics follow the wall clock: a late step (behind a rendered frame) integrates the
+        # time that really passed
+        self.elapsed = ElapsedSteps(max_step_s=1.0)
         self.create_guarded_timer(self.dt, self.step)
         self.create_guarded_timer(1.0 / self.params['state_rate_hz'], self.publish_state)
         self.camera = None
@@ -137,7 +143,9 @@ class SraSim(GuardedCallbacks, Node):
             self.get_logger().warning(
                 f"no chamber_pressure_command for {self.params['cmd_timeout_s']} s: "
                 'venting every chamber')
-        self.plant.step(self.command, self.dt)
+        dt = self.elapsed()
+        if dt > 0.0:
+            self.plant.step(self.command, dt)
 
     def point_msg(self, point: np.ndarray) -> PointStamped:
         msg = PointStamped()
