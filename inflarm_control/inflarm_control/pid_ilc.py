@@ -28,7 +28,8 @@ the trial (the steady part of the paper's recorded output, which the slow PID re
 the error is gone). The last entry learns from the mean error of the rest of the trial. The
 literal reading (the previous output added to every increment) compounds through eq. (3); the
 reading "next output = previous output + this trial's accumulated PID" learns through an
-integrator without lead and diverges on the simulated arm.
+integrator without lead: on the simulated arm it diverges with the default ``P_set`` and
+converges, more slowly than this one, with ``P_set`` at the target's holding pressures.
 
 Errors are taken along each actuator's push direction, ``e = s (zeta_d - zeta_e)`` with
 ``s = +1`` for PEA and for the bellows pushing towards ``+x``/``+y``, ``-1`` otherwise; the paper's
