@@ -5,7 +5,8 @@ pair addressed on a private /30, and nothing else: no other interface, no route 
 own. A process started with `Host.command` runs inside its host with `Host.ros_environment`, so
 what two processes on different hosts exchange crosses the veth link, as between two machines
 on one Ethernet segment. `destroy_hosts` kills whatever still runs inside and deletes both
-namespaces (which deletes the veth pair with them).
+namespaces (which deletes the veth pair with them). Namespaces share /dev/shm, so Fast DDS's
+shared memory would connect them past the link: `udp_only_profile` takes it out of a profile.
 
 Creating network namespaces needs root (CAP_SYS_ADMIN and CAP_NET_ADMIN) and the ``ip`` tool
 (Debian package ``iproute2``); where either is missing, `create_hosts` raises `NamespaceError`
@@ -17,12 +18,14 @@ from dataclasses import dataclass
 import ipaddress
 import json
 import os
+import pathlib
 import re
 import secrets
 import shutil
 import signal
 import subprocess
 import time
+import xml.etree.ElementTree as ET
 
 # Private addresses for the links, one /30 each (two hosts); the namespaces are isolated, so
 # runs at the same time never collide even on the same /30.
@@ -63,12 +66,16 @@ class Host:
         This host's and the other host's IPv4 address on the link.
     interface : str
         The link's interface in this namespace.
+    fastdds_profile : str
+        Fast DDS XML profile of the processes on this host (`udp_only_profile`); empty: the
+        environment's.
     """
 
     namespace: str
     address: str
     peer_address: str
     interface: str = INTERFACE
+    fastdds_profile: str = ''
 
     @property
     def network(self) -> str:
@@ -78,7 +85,7 @@ class Host:
     def ros_environment(self, discovery_range: str = 'SUBNET') -> dict[str, str]:
         """The ROS 2 environment across hosts: the other host as a static peer (unicast
         discovery), UDP only (shared memory would reach a process on the same machine without
-        the network).
+        the network), and `fastdds_profile` if set.
 
         Parameters
         ----------
@@ -90,11 +97,14 @@ class Host:
         if discovery_range not in DISCOVERY_RANGES:
             raise ValueError(f'expected discovery_range one of {DISCOVERY_RANGES}, '
                              f'got {discovery_range!r}')
-        return {
+        environment = {
             'ROS_AUTOMATIC_DISCOVERY_RANGE': discovery_range,
             'ROS_STATIC_PEERS': self.peer_address,
-            'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4',
+            'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4',  # when a profile uses the builtin ones
         }
+        if self.fastdds_profile:
+            environment['FASTRTPS_DEFAULT_PROFILES_FILE'] = self.fastdds_profile
+        return environment
 
     def command(self, command: list[str], discovery_range: str = 'SUBNET') -> list[str]:
         """``command`` run inside this host with `ros_environment` set.
@@ -162,8 +172,61 @@ def check_namespace_name(name: str) -> str:
     return name
 
 
+def udp_only_profile(source: str | os.PathLike, destination: str | os.PathLike,
+                     ) -> pathlib.Path:
+    """Write the Fast DDS XML profile ``source`` to ``destination`` without shared memory.
+
+    Every ``SHM`` transport descriptor goes, with its entries in ``userTransports``; the rest
+    (discovery timing, the UDP transports) is kept. Builtin transports are left to
+    ``FASTDDS_BUILTIN_TRANSPORTS`` (`Host.ros_environment`).
+
+    Returns
+    -------
+    pathlib.Path
+        ``destination``.
+
+    Raises
+    ------
+    ValueError
+        If ``source`` is not XML, or a ``userTransports`` list would be left empty.
+    """
+    try:
+        tree = ET.parse(source)
+    except (ET.ParseError, OSError) as error:
+        raise ValueError(
+            f'expected source a Fast DDS XML profile, got {source}: {error}') from None
+    root = tree.getroot()
+    shared_memory = set()
+    for descriptors in _elements(root, 'transport_descriptors'):
+        for descriptor in list(descriptors):
+            if _text(descriptor, 'type') == 'SHM':
+                shared_memory.add(_text(descriptor, 'transport_id'))
+                descriptors.remove(descriptor)
+    for transports in _elements(root, 'userTransports'):
+        for transport in list(transports):
+            if (transport.text or '').strip() in shared_memory:
+                transports.remove(transport)
+        if len(transports) == 0:
+            raise ValueError(f'expected source with a user transport other than shared memory, '
+                             f'got only {sorted(shared_memory)} in {source}')
+    if root.tag.startswith('{'):
+        ET.register_namespace('', root.tag[1:].split('}')[0])  # written back as the default
+    tree.write(destination, encoding='UTF-8', xml_declaration=True)
+    return pathlib.Path(destination)
+
+
+def _elements(root: ET.Element, name: str) -> list[ET.Element]:
+    """Elements named ``name`` under ``root``, in any XML namespace."""
+    return [element for element in root.iter() if element.tag.rsplit('}', 1)[-1] == name]
+
+
+def _text(element: ET.Element, name: str) -> str:
+    children = [child for child in element if child.tag.rsplit('}', 1)[-1] == name]
+    return (children[0].text or '').strip() if children else ''
+
+
 def create_hosts(prefix: str = 'inflarm-hosts', link_index: int | None = None,
-                 ) -> tuple[Host, Host]:
+                 fastdds_profile: str = '') -> tuple[Host, Host]:
     """Create two hosts joined by a veth link; raise `NamespaceError` where that fails.
 
     Parameters
@@ -173,6 +236,8 @@ def create_hosts(prefix: str = 'inflarm-hosts', link_index: int | None = None,
     link_index : int, optional
         Which /30 of `LINK_NETWORK` the link uses (`link_addresses`); by default derived from
         the process id.
+    fastdds_profile : str
+        `Host.fastdds_profile` of both hosts.
 
     Returns
     -------
@@ -184,8 +249,8 @@ def create_hosts(prefix: str = 'inflarm-hosts', link_index: int | None = None,
     addresses = link_addresses(os.getpid() % 16384 if link_index is None else link_index)
     if shutil.which('ip') is None:
         raise NamespaceError('no `ip` command on PATH (Debian package iproute2)')
-    a = Host(names[0], addresses[0], addresses[1])
-    b = Host(names[1], addresses[1], addresses[0])
+    a = Host(names[0], addresses[0], addresses[1], fastdds_profile=fastdds_profile)
+    b = Host(names[1], addresses[1], addresses[0], fastdds_profile=fastdds_profile)
     created: list[Host] = []
     try:
         for host in (a, b):

@@ -3,7 +3,8 @@
 Host A runs the simulated arm (``sra_sim``), host B its controller (``pressure_controller``), the
 ``trial_runner`` and a probe (``tests/topic_probe.py``). Each host has loopback and its end of
 the link, nothing else, and discovers the other through ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``
-with the other's address in ``ROS_STATIC_PEERS``, over UDP only (``netns_hosts.Host``). A PID
+with the other's address in ``ROS_STATIC_PEERS``, over UDP only: the tests' Fast DDS profile
+without its shared memory, which would join the namespaces past the link (``netns_hosts``). A PID
 trial across the link moves the ball toward the target, its report arrives on host B, and the
 chamber pressures on host A follow host B's commands. With ``LOCALHOST`` instead of ``SUBNET``
 (no multicast at all), the static peer alone finds the other host.
@@ -16,11 +17,12 @@ privileges, on a fake ``ip``.
 import os
 import signal
 import subprocess
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
 
-from inflarm_bringup.processes import NodeProcess
+from inflarm_bringup.processes import NodeProcess, config_path
 from inflarm_hw.valve import valve_output
 from inflarm_model.soft_arm import CHAMBERS
 from inflarm_msgs_json import ChamberPressures, PressureCommand, TrialReport, decode
@@ -31,6 +33,7 @@ from netns_hosts import (
     create_hosts,
     destroy_hosts,
     link_addresses,
+    udp_only_profile,
 )
 from ros_harness import wait_until
 from topic_probe import probe_command, read_records
@@ -40,17 +43,20 @@ TRIAL_DURATION_S = 15.0
 PRESSURE_TOLERANCE_PA = 1000.0  # measured vs commanded, once the command is held
 
 
-def create_hosts_or_skip():
+def create_hosts_or_skip(**kwargs):
     try:
-        return create_hosts()
+        return create_hosts(**kwargs)
     except NamespaceError as error:
         pytest.skip(f'cannot create two network namespaces here: {error}')
 
 
 @pytest.fixture
-def hosts():
-    """Hosts A and B (`netns_hosts.Host`), deleted afterwards with anything left inside."""
-    pair = create_hosts_or_skip()
+def hosts(tmp_path):
+    """Hosts A and B (`netns_hosts.Host`) on the tests' Fast DDS profile without its shared
+    memory; deleted afterwards with anything left inside."""
+    profile = udp_only_profile(os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'],
+                               tmp_path / 'fastdds_udp.xml')
+    pair = create_hosts_or_skip(fastdds_profile=str(profile))
     yield pair
     destroy_hosts(pair)
 
@@ -226,10 +232,39 @@ def test_the_host_environment_is_checked():
     assert host.command(['sleep', '1'], 'LOCALHOST') == [
         'ip', 'netns', 'exec', 'ns-a', 'env', 'ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST',
         'ROS_STATIC_PEERS=10.231.0.2', 'FASTDDS_BUILTIN_TRANSPORTS=UDPv4', 'sleep', '1']
+    profiled = Host('ns-a', '10.231.0.1', '10.231.0.2', fastdds_profile='/p.xml')
+    assert profiled.ros_environment()['FASTRTPS_DEFAULT_PROFILES_FILE'] == '/p.xml'
     with pytest.raises(ValueError, match="expected discovery_range one of .*, got 'OFF'"):
         host.ros_environment('OFF')
     with pytest.raises(ValueError, match='expected a command'):
         host.command([])
+
+
+def test_the_udp_only_profile_keeps_everything_but_shared_memory(tmp_path):
+    source = config_path('inflarm_bringup', 'fastdds_profile.xml')
+    written = udp_only_profile(source, tmp_path / 'udp.xml')
+    root = ET.parse(written).getroot()
+    ns = {'dds': 'http://www.eprosima.com'}
+    assert [e.text for e in root.iterfind('.//dds:transport_descriptor/dds:type', ns)] == [
+        'UDPv4']
+    used = [e.text for e in root.iterfind('.//dds:userTransports/dds:transport_id', ns)]
+    assert used == [e.text for e in root.iterfind('.//dds:transport_descriptor/dds:transport_id',
+                                                  ns)]
+    original = ET.parse(source).getroot()
+    for path in ('.//dds:initialAnnouncements', './/dds:leaseAnnouncement'):
+        assert ET.tostring(root.find(path, ns)) == ET.tostring(original.find(path, ns))
+
+    shm_only = ET.parse(source)
+    transports = shm_only.find('.//dds:userTransports', ns)
+    for transport in transports.findall('dds:transport_id', ns):
+        if transport.text != 'inflarm_shm':
+            transports.remove(transport)
+    shm_only.write(tmp_path / 'shm.xml')
+    with pytest.raises(ValueError, match=r"user transport other than shared memory, got only "
+                                         r"\['inflarm_shm'\]"):
+        udp_only_profile(tmp_path / 'shm.xml', tmp_path / 'out.xml')
+    with pytest.raises(ValueError, match='expected source a Fast DDS XML profile'):
+        udp_only_profile(tmp_path / 'missing.xml', tmp_path / 'out.xml')
 
 
 def test_link_addresses_and_names_are_checked():
