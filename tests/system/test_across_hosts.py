@@ -36,7 +36,7 @@ from netns_hosts import (
     udp_only_profile,
 )
 from ros_harness import wait_until
-from topic_probe import probe_command, read_records
+from topic_probe import TopicProbe, probe_command, read_records
 
 TARGET = np.array([0.100, 0.110, 0.670])  # Fig 7 of 001_..., the trial_runner's default [m]
 TRIAL_DURATION_S = 15.0
@@ -265,6 +265,17 @@ def test_the_udp_only_profile_keeps_everything_but_shared_memory(tmp_path):
         udp_only_profile(tmp_path / 'shm.xml', tmp_path / 'out.xml')
     with pytest.raises(ValueError, match='expected source a Fast DDS XML profile'):
         udp_only_profile(tmp_path / 'missing.xml', tmp_path / 'out.xml')
+
+
+def test_the_probe_needs_a_file_and_topics(ros_context, tmp_path):
+    from rclpy.parameter import Parameter
+
+    with pytest.raises(ValueError, match="parameter 'output' is required"):
+        TopicProbe(context=ros_context)
+    output = Parameter('output', value=str(tmp_path / 'probe.jsonl'))
+    with pytest.raises(ValueError, match="expected topics in 'string_topics' or 'point_topics'"):
+        TopicProbe(context=ros_context, parameter_overrides=[output])
+    assert read_records(tmp_path / 'probe.jsonl') == []
 
 
 def test_link_addresses_and_names_are_checked():
