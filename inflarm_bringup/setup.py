@@ -23,6 +23,7 @@ setup(
     entry_points={
         'console_scripts': [
             'inflarm-launch = inflarm_bringup.launcher:main',
+            'inflarm-demo = inflarm_bringup.demo:main',
             'inflarm-build-knowledge = inflarm_bringup.knowledge_cli:main',
             'inflarm-estimate-bag = inflarm_bringup.bag_estimate:main',
             'inflarm-sra-experiments = inflarm_bringup.sra_experiments:main',
