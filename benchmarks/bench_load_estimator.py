@@ -21,9 +21,8 @@ from common import Row, Target, print_rows
 import numpy as np
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'scripts'))
 
-from inflarm_launch import NodeProcess, ros_environment, start_node_process  # noqa: E402
+from inflarm_bringup.processes import NodeProcess, ros_environment, start_node_process  # noqa: E402
 
 os.environ.update(ros_environment())
 # Outside 1-100, the domains the tests take under a lock (tests/conftest.py).

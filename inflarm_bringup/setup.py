@@ -11,7 +11,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -22,6 +22,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'inflarm-launch = inflarm_bringup.launcher:main',
             'inflarm-build-knowledge = inflarm_bringup.knowledge_cli:main',
             'inflarm-estimate-bag = inflarm_bringup.bag_estimate:main',
             'inflarm-sra-experiments = inflarm_bringup.sra_experiments:main',

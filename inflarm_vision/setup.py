@@ -21,6 +21,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'ball_tracker = inflarm_vision.executables:ball_tracker',
         ],
     },
 )

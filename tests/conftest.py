@@ -1,7 +1,7 @@
 """Shared fixtures: in-process rclpy contexts and node executables as real processes.
 
 Every test gets its own ROS_DOMAIN_ID; DDS stays on loopback with fast discovery announcements
-(scripts/fastdds_profile.xml). Waits are bounded waits on data, never fixed sleeps.
+(inflarm_bringup/config/fastdds_profile.xml). Waits are bounded waits on data, never fixed sleeps.
 """
 
 import fcntl
@@ -13,10 +13,9 @@ import tempfile
 import pytest
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT / 'scripts'))
 sys.path.insert(0, str(REPO_ROOT / 'tests'))
 
-from inflarm_launch import ros_environment  # noqa: E402
+from inflarm_bringup.processes import ros_environment  # noqa: E402
 
 # Before rclpy is imported anywhere: the same DDS environment as the launched processes.
 os.environ.update(ros_environment())

@@ -7,7 +7,7 @@ import pathlib
 import threading
 import time
 
-from inflarm_launch import NodeProcess, ProcessGroup
+from inflarm_bringup.processes import NodeProcess, ProcessGroup
 
 
 def spin_until(executor, predicate: Callable[[], bool], timeout_s: float = 10.0) -> bool:

@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import String
 
 from inflarm_control.nodes.elastostatic_ik import ElastostaticIk
@@ -43,6 +43,8 @@ from inflarm_hw.nodes.hw_bridge import HwBridge
 from inflarm_hw.nodes.joint_state_monitor import JointStateMonitor
 from inflarm_hw.nodes.sim_mcu import SimMcuNode
 from inflarm_hw.nodes.sra_sim import SraSim
+from inflarm_hw.synthetic_camera import SyntheticCamera
+from inflarm_model.camera import PinholeCamera, RigidTransform
 from inflarm_model.elastostatics import motor_torques, spring_deflections
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS
@@ -60,8 +62,10 @@ from inflarm_msgs_json import (
     encode,
 )
 from inflarm_msgs_json.ros.conversions import to_string_msg
+from inflarm_msgs_json.ros.image import numpy_to_image
 from inflarm_planning.nodes.path_planner import PathPlanner
 from inflarm_planning.scenario import GOAL, OBSTACLE, START
+from inflarm_vision.nodes.ball_tracker import BallTrackerNode
 from ros_harness import wait_until
 
 ARM = FlexibleArm()
@@ -302,10 +306,24 @@ NODES = {
             lambda n, out: n.last_request is not None and n.last_request.resolution == 0.01),
         'ball_position': (lambda n: point(0.0, 0.12, 0.71, 'sra_mount'),
                           lambda n, out: n.position == (0.0, 0.12, 0.71))}),
+    'ball_tracker': NodeCase(BallTrackerNode, valid={
+        'camera/camera_info': (lambda n: CameraInfo(**CAMERA.camera_info_fields()),
+                               lambda n, out: n.camera is not None and n.camera.width == 320),
+        'camera/image_raw': (lambda n: _camera_image(), _published('ball_position'))}),
     'joint_state_monitor': NodeCase(JointStateMonitor, valid={
         'joint_states': (lambda n: JointState(name=['joint_1'], position=[0.1]),
                          lambda n, out: n.latest is not None)}),
 }
+
+
+CAMERA = PinholeCamera.ideal(320, 240, 450.0)
+
+
+def _camera_image():
+    """The ball at the soft arm's rest point, seen from ball_tracker's default camera pose."""
+    pose = RigidTransform.from_quaternion([0.0, -1.1, 0.78], [0.0, 0.70710678, 0.70710678, 0.0])
+    frame = SyntheticCamera(CAMERA, pose).render(np.array([0.0, 0.0, 0.604]))
+    return numpy_to_image(frame.image, 'bgr8')
 
 
 def _path_from_current_tip(node) -> Path:

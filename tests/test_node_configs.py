@@ -12,7 +12,7 @@ import yaml
 from inflarm_model.nodes.arm_parameters import ARM_PARAMETERS
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
-CONFIGS = sorted(REPO_ROOT.glob('inflarm_*/config/*.yaml'))
+CONFIGS = sorted(REPO_ROOT.glob('inflarm_*/config/*.yaml'))  # fastdds_profile.xml aside
 SHARED = {'inflatable_arm.yaml': ARM_PARAMETERS}  # files keyed /** for several nodes
 
 
@@ -22,11 +22,20 @@ def kind(value) -> str:
     return type(value).__name__
 
 
+PACKAGES = sorted(p.name for p in REPO_ROOT.glob('inflarm_*') if (p / 'package.xml').is_file())
+
+
 def declared(config: pathlib.Path, node: str):
+    """The parameter table of ``node``: in the config's package, or (a system's config in
+    inflarm_bringup) in whichever package has that node."""
     if node == '/**':
         return SHARED[config.name]
     package = config.parents[1].name
-    return importlib.import_module(f'{package}.nodes.{node}').PARAMETERS
+    candidates = [package] + [p for p in PACKAGES if p != package]
+    for name in candidates:
+        if (REPO_ROOT / name / name / 'nodes' / f'{node}.py').is_file():
+            return importlib.import_module(f'{name}.nodes.{node}').PARAMETERS
+    raise AssertionError(f'{config.name}: no package has a node {node!r}')
 
 
 @pytest.mark.parametrize('config', CONFIGS, ids=lambda p: f'{p.parents[1].name}/{p.name}')

@@ -9,7 +9,7 @@ import subprocess
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 import pytest
 
-from inflarm_launch import NodeProcess
+from inflarm_bringup.processes import NodeProcess
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 PACKAGES = sorted(p.name for p in REPO_ROOT.glob('inflarm_*') if (p / 'package.xml').is_file())

@@ -171,8 +171,9 @@ class InflatableArmSim:
 
     def command(self, q_m: npt.ArrayLike, dq_m: npt.ArrayLike | None = None) -> None:
         """New motor position targets [rad], clamped to the motor limits (``JOINT_LIMITS``),
-        with an optional velocity feed-forward [rad/s] added to each motor's position loop
-        (default 0)."""
+        with an optional velocity feed-forward [rad/s] (default 0): the target then moves on
+        at that velocity until the next command, and the velocity is added to each motor's
+        position loop, as a servo drive interpolates position-and-velocity set points."""
         self.target = np.clip(_finite('q_m', q_m, 3), MOTOR_LOWER, MOTOR_UPPER)
         self.feed_forward = np.zeros(3) if dq_m is None else _finite('dq_m', dq_m, 3)
 
@@ -184,6 +185,9 @@ class InflatableArmSim:
         velocity = self.feed_forward + (self.target - self.q_m) / max(p.motor_time_constant, dt)
         velocity = np.clip(velocity, -p.motor_max_velocity, p.motor_max_velocity)
         self.q_m = self.q_m + velocity * dt
+        # The target moves on at the feed-forward velocity: at the end of the step it is where
+        # the set point is due then, and a motor on it stays on it.
+        self.target = np.clip(self.target + self.feed_forward * dt, MOTOR_LOWER, MOTOR_UPPER)
         self.dq_m = velocity
         self.time += dt
         self._settle()

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 import rclpy
 
+from inflarm_bringup.processes import NodeProcess, ros_environment, start_node_process
 from inflarm_hw.bag import BagWriter, bag_info, serialize, typestore
-from inflarm_launch import NodeProcess, ros_environment, start_node_process
 from inflarm_model.elastostatics import motor_torques, spring_deflections
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import MEAN_STIFFNESS

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from inflarm_launch import NodeProcess, ProcessGroup
+from inflarm_bringup.processes import NodeProcess, ProcessGroup
 from ros_harness import wait_until
 
 pytestmark = pytest.mark.system
@@ -34,3 +34,24 @@ def test_a_node_that_hangs_is_killed_and_reported(domain_id, capsys):
     codes = group.stop(grace_s=0.5)
     assert codes['stuck'] < 0  # killed
     assert '[launch] stuck did not stop within 0.5 s of SIGINT: killed' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('namespace', [[], ['-r', '__ns:=/bridged']])
+def test_overrides_win_over_every_parameter_file_in_any_namespace(namespace):
+    # elastostatic_ik: the shared /** inflatable_arm.yaml, then its own YAML, which sets
+    # gain_per_s; a -p after a /** file would lose to that YAML (rcl applies keys in the order
+    # they first appear).
+    import rclpy
+    from rclpy.node import Node
+
+    node = NodeProcess('inflarm_control', 'elastostatic_ik', parameters={'gain_per_s': 7.5},
+                       shared_params=(('inflarm_model', 'inflatable_arm.yaml'),))
+    context = rclpy.Context()
+    rclpy.init(args=['x', *node.ros_arguments(), *namespace], context=context)
+    try:
+        probe = Node('elastostatic_ik', context=context)
+        assert probe.declare_parameter('gain_per_s', 1.0).value == 7.5
+        assert probe.declare_parameter('arm.link_length_m', 1.0).value == 0.6  # shared file
+        probe.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

@@ -5,9 +5,11 @@ A ``tip_target`` is solved at once; a ``tip_trajectory`` (poses stamped with the
 are due) is integrated with eq. 9 from the current motor angles. Either is checked whole before
 anything is commanded: every motor angle within the joint limits, the model's deflected tip
 within ``max_tip_error_m`` of every waypoint (an unreachable path fails here), the path no
-longer than ``max_duration_s``. The set point is streamed at ``command_rate_hz`` and, after a
-trajectory, held (re-sent) so that the motors' command watchdog stays fed. The load is the
-latest ``estimated_wrench`` or a configured one.
+longer than ``max_duration_s``. The set point is streamed at ``command_rate_hz``, interpolated
+between the integration steps, with the motor velocities of eq. 9 as a feed-forward (so that
+position-controlled motors do not lag the path); after a trajectory it is held (re-sent, zero
+velocity) so that the motors' command watchdog stays fed. The load is the latest
+``estimated_wrench`` or a configured one.
 
 Subscribes:
     tip_target (geometry_msgs/PointStamped, COMMAND_QOS): tip position to reach [m].
@@ -20,7 +22,8 @@ Subscribes:
     estimated_joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): the estimator's deflected
         pose, all 7 joints.
 Publishes:
-    motor_position_command (sensor_msgs/JointState, COMMAND_QOS): joint_1..joint_3 [rad].
+    motor_position_command (sensor_msgs/JointState, COMMAND_QOS): joint_1..joint_3 positions
+        [rad] and velocities [rad/s] (feed-forward).
 Parameters:
     arm.* (inflarm_model.nodes.arm_parameters): geometry, stiffness, link pressure.
     load.source (string): 'estimated' or 'configured'.
@@ -129,6 +132,7 @@ class ElastostaticIk(GuardedCallbacks, Node):
         self.poses: OrderedDict[int, np.ndarray] = OrderedDict()  # stamp [ns] -> q (7,)
         self.pending_wrench: WrenchStamped | None = None  # tip frame, waiting for its pose
         self.trajectory: TrackingResult | None = None
+        self.trajectory_velocity: np.ndarray | None = None  # dq_m of each step [rad/s]
         self.trajectory_start_ns = 0  # node clock time of the trajectory's first waypoint
         self.set_point: np.ndarray | None = None  # last commanded, re-sent while idle
 
@@ -243,6 +247,9 @@ class ElastostaticIk(GuardedCallbacks, Node):
                 f"max_tip_error_m = {p['max_tip_error_m']} m): out of reach or too fast")
         # The first waypoint is due at the path's first stamp; late paths start now.
         self.trajectory = result
+        # Eq. 9 was integrated by explicit Euler: each step's motor velocity is its difference.
+        self.trajectory_velocity = np.vstack([np.diff(result.q_m, axis=0)
+                                              / np.diff(result.times)[:, None], np.zeros(3)])
         self.trajectory_start_ns = max(int(stamps[0]), self.get_clock().now().nanoseconds)
         self.get_logger().info(
             f'tip_trajectory of {len(times)} poses over {times[-1]:.2f} s: model tip error '
@@ -251,21 +258,29 @@ class ElastostaticIk(GuardedCallbacks, Node):
     # -- output --------------------------------------------------------------------------------
 
     def stream(self) -> None:
-        if self.trajectory is not None:
-            elapsed = (self.get_clock().now().nanoseconds - self.trajectory_start_ns) * 1e-9
-            if elapsed < 0.0:
-                return
-            i = int(np.searchsorted(self.trajectory.times, elapsed, side='right')) - 1
-            self.set_point = self.trajectory.q_m[i]
-            if i == len(self.trajectory.times) - 1:
-                self.trajectory = None  # the last set point stays commanded
-        if self.set_point is not None:
-            self.publish_command(self.set_point)
+        if self.trajectory is None:
+            if self.set_point is not None:
+                self.publish_command(self.set_point)
+            return
+        elapsed = (self.get_clock().now().nanoseconds - self.trajectory_start_ns) * 1e-9
+        if elapsed < 0.0:
+            return
+        times = self.trajectory.times
+        i = int(np.searchsorted(times, elapsed, side='right')) - 1
+        if i >= len(times) - 1:
+            last = self.trajectory.q_m[-1]
+            self.trajectory = None  # the last set point stays commanded
+            self.publish_command(last)
+            return
+        velocity = self.trajectory_velocity[i]
+        self.publish_command(self.trajectory.q_m[i] + (elapsed - times[i]) * velocity, velocity)
 
-    def publish_command(self, q_m: np.ndarray) -> None:
+    def publish_command(self, q_m: np.ndarray, velocity: np.ndarray | None = None) -> None:
+        """Command ``q_m`` with a velocity feed-forward (zero when holding)."""
         self.set_point = q_m
-        self.command_pub.publish(joint_state(MOTORS, self.get_clock().now().to_msg(),
-                                             position=q_m))
+        self.command_pub.publish(joint_state(
+            MOTORS, self.get_clock().now().to_msg(), position=q_m,
+            velocity=np.zeros(3) if velocity is None else velocity))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -11,17 +11,19 @@ Subscribes:
 Parameters:
     start, goal (double[3], read-only): path ends [m], base frame.
     duration_s, pause_s (double, read-only): traverse and rest times [s].
+    lead_s (double, read-only): each path is due this long after it is sent, so that the IK has
+        computed it by then and the tip follows the stamps (error measured against them).
     samples (int, read-only): poses per path.
     frame_id (string, read-only).
 """
 
-import time
 
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.time import Time
 
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
@@ -35,6 +37,8 @@ PARAMETERS = (
     Parameter('duration_s', 5.0, 'time to traverse the path [s]', range=(0.1, 600.0),
               read_only=True),
     Parameter('pause_s', 3.0, 'rest at each end [s]', range=(0.0, 600.0), read_only=True),
+    Parameter('lead_s', 0.5, 'a path is due this long after it is sent [s]', range=(0.0, 10.0),
+              read_only=True),
     Parameter('samples', 50, 'poses per path', range=(2, 100000), read_only=True),
     Parameter('frame_id', 'base_link', 'frame of the path', read_only=True),
 )
@@ -49,7 +53,7 @@ class TipPathDemo(GuardedCallbacks, Node):
         if any(end.shape != (3,) or not np.isfinite(end).all() for end in self.ends):
             raise ValueError(f'start and goal must be 3 finite numbers, got {self.ends}')
         self.traverse = 0
-        self.path_start: float | None = None  # monotonic time the current path began
+        self.path_start: int | None = None  # node clock time the current path is due [ns]
         self.path_ends = self.ends
         self.tip: np.ndarray | None = None
         self.errors: list[float] = []
@@ -78,7 +82,7 @@ class TipPathDemo(GuardedCallbacks, Node):
             self.path_ends = (self.tip, self.ends[1])
         else:
             self.path_ends = self.ends if self.traverse % 2 == 0 else self.ends[::-1]
-        now = self.get_clock().now()
+        now = self.get_clock().now() + Duration(seconds=p['lead_s'])
         path = Path()
         path.header.stamp = now.to_msg()
         path.header.frame_id = p['frame_id']
@@ -91,7 +95,7 @@ class TipPathDemo(GuardedCallbacks, Node):
             pose.pose.orientation.w = 1.0
             path.poses.append(pose)
         self.path_pub.publish(path)
-        self.path_start = time.monotonic()
+        self.path_start = now.nanoseconds  # node clock, as the truth's stamps
         self.errors = []
 
     def on_truth(self, msg: PointStamped) -> None:
@@ -101,8 +105,8 @@ class TipPathDemo(GuardedCallbacks, Node):
         self.tip = tip
         if self.path_start is None:
             return
-        self.errors.append(float(np.linalg.norm(
-            tip - self.reference(time.monotonic() - self.path_start))))
+        elapsed = (Time.from_msg(msg.header.stamp).nanoseconds - self.path_start) * 1e-9
+        self.errors.append(float(np.linalg.norm(tip - self.reference(elapsed))))
 
     def report(self) -> None:
         if not self.errors:

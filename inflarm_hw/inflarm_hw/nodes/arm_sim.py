@@ -2,8 +2,10 @@
 
 Subscribes:
     motor_position_command (sensor_msgs/JointState, COMMAND_QOS): target angles [rad] of some
-        or all of joint_1..joint_3, by name, within the joint limits; a command with a joint
-        outside its limits is rejected whole.
+        or all of joint_1..joint_3, by name, within the joint limits (a command with a joint
+        outside its limits is rejected whole), and optionally velocities [rad/s], a
+        feed-forward added to each motor's position loop; the positions are those due at the
+        command's stamp, carried on by the velocities to the simulation's time.
 Publishes:
     joint_states (sensor_msgs/JointState, JOINT_STATE_QOS): joint_1..joint_3 angles [rad],
         velocities [rad/s] and, in ``effort``, the torque each motor applies [N·m]: the
@@ -32,6 +34,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
+from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from inflarm_hw.nodes.plant_parameters import (
@@ -59,6 +62,7 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('frame_id', 'base_link', 'base frame', read_only=True),
 )
 MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
+MAX_COMMAND_AGE_S = 0.5  # older set points are applied as if due at the last step
 
 
 class ArmSim(GuardedCallbacks, Node):
@@ -73,6 +77,7 @@ class ArmSim(GuardedCallbacks, Node):
         self.sim = arm_plant_from_parameters(p, np.random.default_rng(None if seed < 0 else seed))
         self.dt = 1.0 / p['rate_hz']
         self.last_command_time: float | None = None  # steady clock; None: holding
+        self.last_step_ns = self.get_clock().now().nanoseconds  # node clock of the last step
 
         self.create_guarded_subscription(
             JointState, 'motor_position_command', self.on_command, COMMAND_QOS)
@@ -101,11 +106,17 @@ class ArmSim(GuardedCallbacks, Node):
         if unknown or not names:
             raise InputError('unknown joint', f'unknown joints {unknown or list(msg.name)}, '
                                               f'expected some of {list(MOTORS)}')
-        positions = joint_arrays(msg, names)['position']
-        target = self.sim.target.copy()
-        for name, position in zip(names, positions, strict=True):
-            target[MOTORS.index(name)] = position
-        self.sim.command(target)
+        arrays = joint_arrays(msg, names, optional=('velocity',))
+        target, feed_forward = self.sim.target.copy(), np.zeros(3)  # unnamed joints: no ff
+        for k, name in enumerate(names):
+            target[MOTORS.index(name)] = arrays['position'][k]
+            if arrays['velocity'] is not None:
+                feed_forward[MOTORS.index(name)] = arrays['velocity'][k]
+        # The set point is due at its stamp; the next step carries it on by one step from the
+        # last one, so start it where it stood then (a stamp of 0: due now).
+        stamp_ns = Time.from_msg(msg.header.stamp).nanoseconds or self.last_step_ns
+        age = min(max((self.last_step_ns - stamp_ns) * 1e-9, -self.dt), MAX_COMMAND_AGE_S)
+        self.sim.command(target + feed_forward * age, feed_forward)
         self.last_command_time = time.monotonic()
 
     def step(self) -> None:
@@ -121,7 +132,9 @@ class ArmSim(GuardedCallbacks, Node):
         except RuntimeError as err:  # no equilibrium: hold the last state, say why
             self.problems.warn('step', str(err))
             return
-        stamp = self.get_clock().now().to_msg()
+        now = self.get_clock().now()
+        self.last_step_ns = now.nanoseconds
+        stamp = now.to_msg()
         self.joint_state_pub.publish(joint_state(
             FlexibleArm.MOTOR_JOINT_NAMES, stamp, position=state.q_m, velocity=state.dq_m,
             effort=-state.tau_m))

@@ -8,6 +8,10 @@ Publishes:
     end_point_truth (geometry_msgs/PointStamped, SENSOR_QOS): true end point [m], for evaluation.
     ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the end point as the camera measures
         it (with noise), when ``publish_ball_position`` is true.
+    camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
+        SENSOR_QOS: the simulated external camera's view of the yellow ball at the true end
+        point, at ``camera_rate_hz``, when ``camera.enabled`` and while someone subscribes
+        (``inflarm_hw.nodes.camera_publisher``).
 Parameters:
     physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates.
     publish_ball_position (bool): publish the simulated measurement on ``ball_position``.
@@ -16,6 +20,7 @@ Parameters:
     max_chamber_pressure_pa (double, read-only): commands above this are rejected whole.
     frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
     seed (int, read-only): noise seed, -1 for a random one.
+    camera.* : the simulated camera (``inflarm_hw.nodes.camera_publisher.CAMERA_PARAMETERS``).
 """
 
 import dataclasses
@@ -26,6 +31,7 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import String
 
+from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
 from inflarm_msgs_json import ChamberPressures, PressureCommand
@@ -53,7 +59,7 @@ PARAMETERS = (
     Parameter('frame_id', 'sra_mount', 'frame of the published points', read_only=True),
     Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
               read_only=True),
-)
+) + CAMERA_PARAMETERS
 
 
 class SraSim(GuardedCallbacks, Node):
@@ -83,6 +89,10 @@ class SraSim(GuardedCallbacks, Node):
         self.dt = 1.0 / self.params['physics_rate_hz']
         self.create_guarded_timer(self.dt, self.step)
         self.create_guarded_timer(1.0 / self.params['state_rate_hz'], self.publish_state)
+        self.camera = None
+        if self.params['camera.enabled']:
+            self.camera = CameraPublisher(self, self.params, lambda: self.plant.end_point[0],
+                                          None if seed < 0 else seed)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: SRA at rest, {self.params['physics_rate_hz']} Hz physics, chambers "

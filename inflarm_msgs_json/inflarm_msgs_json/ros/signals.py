@@ -7,7 +7,7 @@ node's modules import is lost or ends in a traceback. Instead, every node execut
 
 1. installs these handlers first (its entry point, `node_entry`, imports nothing slow before),
    then unblocks SIGINT and SIGTERM -- a parent that must not lose a stop request starts its
-   children with both blocked (see ``scripts/inflarm_launch.py``), so one sent before the
+   children with both blocked (see ``inflarm_bringup.processes``), so one sent before the
    handlers exist waits for them instead of killing the interpreter;
 2. while it imports its node module, a stop request aborts the import (`StartupInterrupted`)
    and the process exits 0 at once;
@@ -131,8 +131,13 @@ def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
         try:
             install_stop_handlers()
             main = getattr(importlib.import_module(module), function)
-        except StartupInterrupted:
-            sys.exit(0)
+        except BaseException:
+            # Raised where the stop request found the import, it may arrive wrapped: a C
+            # extension whose initialisation it interrupted reports "ImportError:
+            # initialization failed".
+            if stop_requested():
+                sys.exit(0)
+            raise
         finally:
             _abort_startup = False
         if stop_requested():

@@ -1,0 +1,144 @@
+"""The simulated external camera a simulator node carries (not an executable).
+
+`CameraPublisher` renders the yellow ball at a point the node supplies through
+`inflarm_hw.synthetic_camera` and publishes, on the node:
+
+    camera/image_raw (sensor_msgs/Image, bgr8, SENSOR_QOS): stamped with the capture time,
+        published ``camera.latency_s`` later.
+    camera/camera_info (sensor_msgs/CameraInfo, SENSOR_QOS): the intrinsics, same stamp,
+        published right after the image (as image_transport's CameraPublisher does; published
+        before it, a subscriber to both received half the images over UDP in a test here).
+
+Frames are captured at the node's ``camera_rate_hz`` and only while ``camera/image_raw`` has a
+subscriber (rendering costs about 10-20 ms a frame at 640x480).
+
+Parameters (`CAMERA_PARAMETERS`, declared by the node with its own):
+    camera.enabled (bool, read-only): publish images at all.
+    camera.width, camera.height (int, read-only): image size [px].
+    camera.focal_px (double, read-only): focal length, square pixels, principal point at the
+        image centre [px].
+    camera.distortion (double[5], read-only): plumb_bob k1, k2, p1, p2, k3.
+    camera.translation_m (double[3], read-only): camera (optical frame) origin in the node's
+        frame (``sra_mount``) [m].
+    camera.rotation_xyzw (double[4], read-only): camera -> mount rotation, quaternion.
+        The defaults put the camera 1.1 m from the arm's axis on -y, level with the middle of
+        the work space, looking along +y (``look_at([0, -1.1, 0.78], [0, 0, 0.78])``).
+    camera.ball_diameter_m (double, read-only): diameter of the yellow ball [m].
+    camera.background (string, read-only): plain, noise or clutter.
+    camera.noise_std (double, read-only): sensor noise [grey levels].
+    camera.blur_sigma_px, camera.exposure (double): blur [px] and exposure gain, changeable
+        at runtime.
+    camera.latency_s (double): delay from capture to publication [s].
+    camera.frame_id (string, read-only): frame of the images.
+"""
+
+from collections.abc import Callable
+
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+
+from inflarm_hw.synthetic_camera import Scene, SyntheticCamera
+from inflarm_model.camera import PinholeCamera, RigidTransform
+from inflarm_msgs_json.ros.image import numpy_to_image
+from inflarm_msgs_json.ros.parameters import Parameter
+from inflarm_msgs_json.ros.qos import SENSOR_QOS
+
+CAMERA_PARAMETERS = (
+    Parameter('camera.enabled', True, 'publish simulated camera images', read_only=True),
+    Parameter('camera.width', 640, 'image width [px]', range=(16, 4096), read_only=True),
+    Parameter('camera.height', 480, 'image height [px]', range=(16, 4096), read_only=True),
+    Parameter('camera.focal_px', 900.0, 'focal length [px]', range=(10.0, 20000.0),
+              read_only=True),
+    Parameter('camera.distortion', [-0.12, 0.05, 0.0, 0.0, 0.0],
+              'plumb_bob distortion k1, k2, p1, p2, k3', read_only=True),
+    Parameter('camera.translation_m', [0.0, -1.1, 0.78],
+              'camera origin in sra_mount [m]', read_only=True),
+    Parameter('camera.rotation_xyzw', [0.0, 0.70710678, 0.70710678, 0.0],
+              'camera -> sra_mount rotation, quaternion x, y, z, w', read_only=True),
+    Parameter('camera.ball_diameter_m', 0.04, 'diameter of the yellow ball [m]',
+              range=(0.001, 0.5), read_only=True),
+    Parameter('camera.background', 'noise', 'background: plain, noise or clutter',
+              read_only=True),
+    Parameter('camera.noise_std', 1.5, 'sensor noise [grey levels]', range=(0.0, 50.0),
+              read_only=True),
+    Parameter('camera.blur_sigma_px', 0.5, 'image blur [px]', range=(0.0, 10.0)),
+    Parameter('camera.exposure', 1.0, 'exposure gain', range=(0.05, 10.0)),
+    Parameter('camera.latency_s', 0.03, 'delay from capture to publication [s]',
+              range=(0.0, 2.0)),
+    Parameter('camera.frame_id', 'camera_optical_frame', 'frame of the images',
+              read_only=True),
+)
+
+
+def synthetic_camera_from_parameters(params: dict, seed: int | None) -> SyntheticCamera:
+    """The renderer the ``camera.*`` parameters describe; ``ValueError`` naming a bad one."""
+    camera = PinholeCamera.ideal(params['camera.width'], params['camera.height'],
+                                 params['camera.focal_px'], d=params['camera.distortion'])
+    pose = RigidTransform.from_quaternion(params['camera.translation_m'],
+                                          params['camera.rotation_xyzw'])
+    scene = Scene(background=params['camera.background'],
+                  noise_std=params['camera.noise_std'],
+                  blur_sigma_px=params['camera.blur_sigma_px'],
+                  exposure=params['camera.exposure'])
+    return SyntheticCamera(camera, pose, 0.5 * params['camera.ball_diameter_m'], scene,
+                           seed=seed)
+
+
+class CameraPublisher:
+    """Publishes rendered images of the ball at ``ball_position()`` on ``node``.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node with inflarm_msgs_json.ros.node.GuardedCallbacks
+        Has declared `CAMERA_PARAMETERS` and ``camera_rate_hz``; ``params`` holds their
+        current values (the node keeps it up to date). Its timers are guarded.
+    params : dict
+    ball_position : callable
+        Returns the ball's centre in the node's frame [m], shape (3,).
+    seed : int or None
+        Seed of the background and the noise.
+    """
+
+    def __init__(self, node: Node, params: dict,
+                 ball_position: Callable[[], np.ndarray], seed: int | None) -> None:
+        self.node = node
+        self.params = params
+        self.ball_position = ball_position
+        self.renderer = synthetic_camera_from_parameters(params, seed)
+        self.image_pub = node.create_publisher(Image, 'camera/image_raw', SENSOR_QOS)
+        self.info_pub = node.create_publisher(CameraInfo, 'camera/camera_info', SENSOR_QOS)
+        self.timer = node.create_guarded_timer(1.0 / params['camera_rate_hz'], self.capture,
+                                               name='camera')
+        self._pending: list = []  # one-shot timers of frames waiting for their latency
+
+    def capture(self) -> None:
+        if self.image_pub.get_subscription_count() == 0:
+            return
+        stamp = self.node.get_clock().now()
+        frame = self.renderer.render(self.ball_position(),
+                                     exposure=self.params['camera.exposure'],
+                                     blur_sigma_px=self.params['camera.blur_sigma_px'])
+        image = numpy_to_image(frame.image, 'bgr8')
+        image.header.stamp = stamp.to_msg()
+        image.header.frame_id = self.params['camera.frame_id']
+        info = CameraInfo(**self.renderer.camera.camera_info_fields())
+        info.header = image.header
+        remaining = self.params['camera.latency_s'] - (
+            self.node.get_clock().now() - stamp).nanoseconds * 1e-9
+        if remaining <= 0.0:
+            self.publish(image, info)
+            return
+        holder: list = []
+
+        def deliver() -> None:
+            self.publish(image, info)
+            self.node.destroy_timer(holder[0])
+            self._pending.remove(holder[0])
+
+        holder.append(self.node.create_guarded_timer(remaining, deliver, name='camera'))
+        self._pending.append(holder[0])
+
+    def publish(self, image: Image, info: CameraInfo) -> None:
+        self.image_pub.publish(image)
+        self.info_pub.publish(info)
