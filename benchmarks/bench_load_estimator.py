@@ -13,16 +13,13 @@ never processed; the target is none (the command exits 1 otherwise). The domain 
 import argparse
 import multiprocessing
 import os
-import pathlib
 import sys
 import time
 
 from common import Row, Target, print_rows
 import numpy as np
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
-
-from inflarm_bringup.processes import NodeProcess, ros_environment, start_node_process  # noqa: E402
+from inflarm_bringup.processes import NodeProcess, ros_environment, start_node_process
 
 os.environ.update(ros_environment())
 # Outside 1-100, the domains the tests take under a lock (tests/conftest.py).
