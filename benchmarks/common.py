@@ -7,6 +7,12 @@ table (`markdown_table`); each module's own ``main()`` prints its detailed repor
 
 The ratio of a row is always figure / baseline (both in the row's unit): below 1 the figure is
 smaller (faster, lighter) than its baseline. Targets are reported, never asserted.
+
+Adding a benchmark: a new ``bench_<name>.py`` is picked up by ``run_all.py`` as it lands. Its
+``run(quick=True)`` takes a few seconds (``tests/test_benchmarks.py`` runs them all), prints
+nothing the table needs (its report is its ``main()``), raises on a real failure, and returns
+``Row.skipped(name, reason)`` for a figure it cannot measure (an optional peer missing: see
+`skip_reason_if_missing`). Time candidates with `interleaved`, the one timer here.
 """
 
 from collections.abc import Callable, Iterable, Mapping

@@ -11,10 +11,10 @@ in the same run, the ratio figure / baseline, the target and whether it is met, 
 figure that could not be measured (a missing optional peer, such as tcod) is a row saying it
 was skipped and why. Progress, and the output of a benchmark that failed, go to stderr.
 
-Time on the 2-core machine: ``--quick`` (a few seconds a benchmark, for CI smoke) about 1 min;
-the full run about 8 min: planning ~2 min, elastostatic ~2 min (its ambiguity search),
-knowledge ~1.5 min (the full 67,200-point build), kinematics ~40 s, load_estimator ~35 s (20 s
-of joint_states at 1 kHz), pid_ilc and mcu_link ~15 s each.
+Time on the shared 2-core machine: ``--quick`` (a few seconds a benchmark, for CI smoke) about
+40 s; the full run about 6 min: planning ~2.5 min (1 mm grids, tcod, heapq), knowledge
+~1.5 min (the full 67,200-point build), elastostatic ~1 min (its ambiguity search),
+load_estimator ~30 s (20 s of joint_states at 1 kHz), vision ~25 s, the others ~10 s each.
 
 Exit code 0 when every benchmark ran, whether its targets were met or not (targets are
 reported, not asserted); 1 when one crashed, timed out or has no ``run(quick)``.
