@@ -290,7 +290,7 @@ def rows(m: dict) -> list[Row]:
 
 def run(quick: bool) -> list[Row]:
     """Rows of the summary table (--quick: one motion, 1,000 samples, 200 waypoints, no
-    ambiguity; full: with the ambiguity search, about 1 min)."""
+    ambiguity; full: with the ambiguity search, under a minute)."""
     return rows(measure(quick, ambiguity=not quick))
 
 
