@@ -12,6 +12,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -23,6 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'inflarm-launch = inflarm_bringup.launcher:main',
+            'inflarm-demo = inflarm_bringup.demo:main',
             'inflarm-build-knowledge = inflarm_bringup.knowledge_cli:main',
             'inflarm-estimate-bag = inflarm_bringup.bag_estimate:main',
             'inflarm-sra-experiments = inflarm_bringup.sra_experiments:main',

@@ -647,6 +647,47 @@ def seed_memory(db: KnowledgeDatabase, target: npt.ArrayLike) -> npt.NDArray[np.
     return db.read(db.grid.index_of(target))
 
 
+def holding_pressure(db: KnowledgeDatabase, point: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """
+    Chamber pressures that hold the end at ``point``, interpolated from the knowledge points.
+
+    The last step of a knowledge point's memory is the output its learned trial settled on:
+    the pressures that hold the end there. Between points they are interpolated trilinearly
+    over the 8 surrounding knowledge points (clamped to the grid at its faces), a feedforward
+    for a target that moves (a planned path, section 4.2).
+
+    Parameters
+    ----------
+    db : KnowledgeDatabase
+        A database whose points around ``point`` are all filled.
+    point : array-like, shape (3,)
+        [m, sra_mount], inside ``db.grid``.
+
+    Returns
+    -------
+    ndarray, shape (5,)
+        [Pa], in ``CHAMBERS`` order.
+
+    Raises
+    ------
+    ValueError
+        If the point is malformed or outside the grid.
+    KeyError
+        If a surrounding knowledge point holds no memory.
+    """
+    if not isinstance(db, KnowledgeDatabase):
+        raise ValueError(f'expected db to be a KnowledgeDatabase, got {type(db).__name__}')
+    grid = db.grid
+    grid.index_of(point)  # checks the point: finite, inside the covered box
+    cells = (np.asarray(point, dtype=float) - grid.origin) / grid.spacing
+    low = np.clip(np.floor(cells).astype(int), 0, np.asarray(grid.shape) - 2)
+    fraction = np.clip(cells - low, 0.0, 1.0)
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    index = np.ravel_multi_index(tuple((low + corners).T), grid.shape)
+    weights = np.prod(np.where(corners, fraction, 1.0 - fraction), axis=1)
+    return weights @ db.read(index)[:, -1, :]  # KeyError where one holds no memory
+
+
 @dataclass(frozen=True)
 class _BuildJob:
     # Everything a (possibly forked) worker needs to learn one batch of knowledge points.

@@ -5,7 +5,11 @@ takes the latest ball position, runs the three axis controllers and publishes th
 pressures. After ``trial_duration_s`` the trial's outputs become the ILC memory of that target
 (seeding the next ``pid_ilc`` trial to it), a TrialReport is published, and the last pressures
 are held. Without a memory, a ``pid_ilc`` task is seeded from the experiential knowledge database
-(when one is configured). A planned path is followed waypoint by waypoint with PID (section 4.2).
+(when one is configured). A planned path is followed waypoint by waypoint with PID (section 4.2):
+each waypoint's trial starts from the held pressures or, with a knowledge database, from them
+plus the change of the holding pressures from where the end is to the waypoint (interpolated
+between knowledge points, ``knowledge.holding_pressure``): a feedforward that carries the end
+there at the valves' pace while PID trims, and in which a bias of the database cancels.
 
 Subscribes:
     ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m]; a point
@@ -43,7 +47,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from inflarm_control.knowledge import KnowledgeDatabase, seed_memory
+from inflarm_control.knowledge import KnowledgeDatabase, holding_pressure, seed_memory
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams
 from inflarm_control.trial_metrics import TrialMetrics
 from inflarm_model.soft_arm import CHAMBERS, Workspace, check_in_workspace
@@ -204,13 +208,29 @@ class PressureController(GuardedCallbacks, Node):
         check_in_workspace(waypoints, self.core_params.workspace, 'waypoint')
         self.get_logger().info(f'following a path of {len(waypoints)} waypoints')
         self.waypoints = list(waypoints[1:])
-        self.start_task(ControlTask(frame_id=self.params['frame_id'],
-                                    target=tuple(waypoints[0]), mode='pid', trial_id=0))
+        self.start_waypoint(waypoints[0])
+
+    def start_waypoint(self, target: np.ndarray) -> bool:
+        """Start the trial to a path's next waypoint (see the module docstring)."""
+        initial = None
+        if self.knowledge is not None and self.command is not None:
+            try:
+                change = (holding_pressure(self.knowledge, target)
+                          - holding_pressure(self.knowledge, self.position))
+                initial = np.clip(self.command + change, 0.0, self.core_params.p_max)
+            except (KeyError, ValueError) as err:
+                self.problems.warn('path', f'no knowledge for waypoint {target.tolist()}: '
+                                           f'{err}', kind='no knowledge')
+        return self.start_task(ControlTask(frame_id=self.params['frame_id'],
+                                           target=tuple(target), mode='pid', trial_id=0),
+                               initial_output=initial, log=False)
 
     # -- trials --------------------------------------------------------------------------------
 
-    def start_task(self, task: ControlTask, restart_metrics: bool = True) -> bool:
-        """Start a trial of ``task`` from the current position; False (logged) if it can't."""
+    def start_task(self, task: ControlTask, restart_metrics: bool = True,
+                   initial_output: np.ndarray | None = None, log: bool = True) -> bool:
+        """Start a trial of ``task`` from the current position, its outputs starting at
+        ``initial_output`` (default: the held pressures); False (logged) if it can't."""
         if self.position is None:
             self.get_logger().error(
                 f'task to {list(task.target)} rejected: no ball_position received yet')
@@ -224,9 +244,11 @@ class PressureController(GuardedCallbacks, Node):
                 memory, source = seed_memory(self.knowledge, target), 'knowledge database'
             except (KeyError, ValueError) as err:
                 self.get_logger().warning(f'no knowledge for this task: {err}')
-        held = np.zeros(len(CHAMBERS)) if self.command is None else self.command
+        if initial_output is None:
+            initial_output = np.zeros(len(CHAMBERS)) if self.command is None else self.command
         try:
-            self.controller.start_trial(self.position, target, memory, initial_output=held)
+            self.controller.start_trial(self.position, target, memory,
+                                        initial_output=initial_output)
         except ValueError as err:
             self.get_logger().error(f'task to {list(task.target)} rejected: {err}')
             return False
@@ -235,8 +257,9 @@ class PressureController(GuardedCallbacks, Node):
         self.trial_steps = 0
         if restart_metrics:
             self.metrics = TrialMetrics(target, self.params['reach_tolerance_m'])
-        self.get_logger().info(
-            f'trial {task.trial_id} ({task.mode}, {source}) to {np.round(target, 4).tolist()}')
+        if log:
+            self.get_logger().info(f'trial {task.trial_id} ({task.mode}, {source}) to '
+                                   f'{np.round(target, 4).tolist()}')
         return True
 
     def step(self) -> None:
@@ -261,8 +284,9 @@ class PressureController(GuardedCallbacks, Node):
                 self.position - self.controller.target[0]) <= self.params['path_tolerance_m']:
             next_target = self.waypoints.pop(0)
             self.controller.finish_trial()
-            self.start_task(ControlTask(frame_id=self.params['frame_id'],
-                                        target=tuple(next_target), mode='pid', trial_id=0))
+            self.start_waypoint(next_target)
+            if not self.waypoints:
+                self.get_logger().info('path followed to its last waypoint; holding it')
         elif not self.waypoints and elapsed >= self.params['trial_duration_s']:
             self.finish_trial()
 
