@@ -17,7 +17,8 @@ Publishes:
 Parameters:
     arm.* (inflarm_model.nodes.arm_parameters): geometry, stiffness, link pressure.
     tip_force_n (double[3]): external tip load [N], base frame; may change at runtime.
-    rate_hz (double, read-only): simulation and publishing rate.
+    rate_hz (double, read-only): publishing rate; each step simulates the time that passed
+        since the previous one (at most 0.5 s), so a late step does not slow the arm down.
     initial_motor_positions_rad (double[3], read-only).
     motor.time_constant_s, motor.max_velocity_rad_s (double, read-only): motor response.
     noise.position_rad, noise.effort_nm (double): sensor noise.
@@ -43,6 +44,7 @@ from inflarm_hw.nodes.plant_parameters import (
     arm_plant_from_parameters,
     check_arm_plant_parameters,
 )
+from inflarm_hw.realtime import ElapsedSteps
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.ros_conversions import joint_arrays, joint_state
 from inflarm_msgs_json.ros.node import GuardedCallbacks
@@ -76,6 +78,9 @@ class ArmSim(GuardedCallbacks, Node):
         seed = p['seed']
         self.sim = arm_plant_from_parameters(p, np.random.default_rng(None if seed < 0 else seed))
         self.dt = 1.0 / p['rate_hz']
+        # Step by the time that passed, not the timer's period: a late callback (a stalled
+        # host) must not leave the arm behind the IK's time-stamped set points.
+        self.elapsed = ElapsedSteps(max_step_s=MAX_COMMAND_AGE_S)
         self.last_command_time: float | None = None  # steady clock; None: holding
         self.last_step_ns = self.get_clock().now().nanoseconds  # node clock of the last step
 
@@ -127,8 +132,11 @@ class ArmSim(GuardedCallbacks, Node):
             self.sim.command(self.sim.q_m)
             self.get_logger().warning(
                 f'no motor_position_command for {timeout} s: holding the motors where they are')
+        dt = self.elapsed()
+        if dt <= 0.0:
+            return
         try:
-            state = self.sim.step(self.dt)
+            state = self.sim.step(dt)
         except RuntimeError as err:  # no equilibrium: hold the last state, say why
             self.problems.warn('step', str(err))
             return
