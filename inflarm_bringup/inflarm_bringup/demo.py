@@ -11,7 +11,9 @@ and runs the two missions side by side:
   first; seeded by it, the camera-tracked end moves to the paper's start (0, 130, 710) mm; the
   obstacle of Fig 10 (x 35-140, y 40-140, z 650-780 mm) is published with its alert region and
   a plan to the goal (130, 0, 730) mm is requested; the pressure controller follows the planned
-  path, from waypoint to waypoint with the knowledge's holding pressures as feedforward.
+  path (``inflarm_control.path_following``: a reference moving along it that waits for the arm,
+  the knowledge's holding pressures as feedforward, a PI per axis, the bellows pairs driven
+  antagonistically).
   Measured on the simulator's true end point: the distance to the planned path (the paper:
   under 5 mm), the clearance of the end and of the actuators' axes to the obstacle;
 - the inflatable arm (paper 000, section 2.4 and Figs 10-11): under a tip load it is not told,
