@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
+from rclpy.time import Time
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
 from inflarm_hw.nodes.arm_sim import ArmSim
 from inflarm_hw.realtime import ElapsedSteps
@@ -119,5 +121,13 @@ def test_a_late_step_simulates_the_time_that_passed(ros_context):
         clock[0] = 10.0  # a suspended process: at most 0.5 s is simulated
         sim.step()
         assert sim.sim.time - start == pytest.approx(0.8)
+        # The controller was not stalled: its set point, stamped 0.3 s after the last step,
+        # is where the target is once the simulator has caught up with that time.
+        stamp = Time(nanoseconds=sim.last_step_ns + 300_000_000)
+        sim.on_command(JointState(header=Header(stamp=stamp.to_msg()), name=['joint_1'],
+                                  position=[0.4], velocity=[0.5]))
+        clock[0] = 10.3
+        sim.step()
+        assert sim.sim.target[0] == pytest.approx(0.4)
     finally:
         sim.destroy_node()

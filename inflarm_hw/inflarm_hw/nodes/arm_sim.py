@@ -64,7 +64,7 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('frame_id', 'base_link', 'base frame', read_only=True),
 )
 MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
-MAX_COMMAND_AGE_S = 0.5  # older set points are applied as if due at the last step
+MAX_COMMAND_AGE_S = 0.5  # a set point is carried to the last step's time by at most this
 
 
 class ArmSim(GuardedCallbacks, Node):
@@ -117,10 +117,12 @@ class ArmSim(GuardedCallbacks, Node):
             target[MOTORS.index(name)] = arrays['position'][k]
             if arrays['velocity'] is not None:
                 feed_forward[MOTORS.index(name)] = arrays['velocity'][k]
-        # The set point is due at its stamp; the next step carries it on by one step from the
-        # last one, so start it where it stood then (a stamp of 0: due now).
+        # The set point is due at its stamp; the next step carries it on from the last one's
+        # time, so start it where it stood then (a stamp of 0: due now). A stamp after the last
+        # step (this simulator late, the controller not) is carried back.
         stamp_ns = Time.from_msg(msg.header.stamp).nanoseconds or self.last_step_ns
-        age = min(max((self.last_step_ns - stamp_ns) * 1e-9, -self.dt), MAX_COMMAND_AGE_S)
+        age = float(np.clip((self.last_step_ns - stamp_ns) * 1e-9, -MAX_COMMAND_AGE_S,
+                            MAX_COMMAND_AGE_S))
         self.sim.command(target + feed_forward * age, feed_forward)
         self.last_command_time = time.monotonic()
 
