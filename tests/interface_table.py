@@ -10,7 +10,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-from inflarm_bringup.launcher import node_class
+from inflarm_bringup.launcher import in_process_arguments, node_class
 from inflarm_bringup.systems import Backend, system_nodes
 
 HIDDEN = {'/parameter_events', '/rosout', '/clock'}  # rclpy's own
@@ -45,11 +45,7 @@ def interface_rows(domain_id: int, mcu_link: str) -> tuple[list[str], list[str]]
     ``| nodes | parameter | value as launched | description |``."""
     specs = {n.node_name: n for systems in (
         system_nodes('sim'), system_nodes('sim', Backend('sim_mcu', mcu_link))) for n in systems}
-    arguments = ['interface-table', '--ros-args']
-    for spec in specs.values():
-        for path in spec.parameter_files():
-            if path not in arguments:
-                arguments += ['--params-file', path]
+    arguments = ['interface-table', *in_process_arguments(tuple(specs.values()))]
     context = rclpy.Context()
     rclpy.init(args=arguments, context=context, domain_id=domain_id)
     topics: dict[str, dict] = {}

@@ -102,6 +102,17 @@ def node_class(node: NodeProcess) -> type:
     return classes[0]
 
 
+def in_process_arguments(nodes: tuple[NodeProcess, ...]) -> list[str]:
+    """The ROS arguments of one context holding all of ``nodes``: every node's parameter
+    files, a shared one once (each file keys its values by node name or ``/**``)."""
+    arguments = ['--ros-args']
+    for node in nodes:
+        for path in node.parameter_files():
+            if path not in arguments:
+                arguments += ['--params-file', path]
+    return arguments
+
+
 def launch_in_process(nodes: tuple[NodeProcess, ...], duration_s: float | None = None) -> None:
     """Run ``nodes`` in this process on one multi-threaded executor until a stop request."""
     from rclpy.parameter import Parameter
@@ -109,11 +120,7 @@ def launch_in_process(nodes: tuple[NodeProcess, ...], duration_s: float | None =
     from inflarm_msgs_json.ros.signals import request_stop
     from inflarm_msgs_json.ros.spin import run_nodes
 
-    arguments = ['--ros-args']
-    for node in nodes:
-        for path in node.parameter_files():
-            if path not in arguments:  # a shared file once
-                arguments += ['--params-file', path]
+    arguments = in_process_arguments(nodes)
     factories = [functools.partial(node_class(n), parameter_overrides=[
         Parameter(k, value=list(v) if isinstance(v, tuple) else v)
         for k, v in n.parameters.items()]) for n in nodes]

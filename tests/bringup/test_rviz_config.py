@@ -8,7 +8,7 @@ import pytest
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 import yaml
 
-from inflarm_bringup.launcher import node_class
+from inflarm_bringup.launcher import in_process_arguments, node_class
 from inflarm_bringup.systems import STATIC_FRAMES, rviz_config, system_nodes, visualization_nodes
 
 DISPLAY_TYPES = {
@@ -53,11 +53,7 @@ def endpoints():
 
     domain, lock = lock_free_domain()
     nodes = system_nodes('sim')
-    arguments = ['rviz-config-test', '--ros-args']
-    for node in nodes:
-        for path in node.parameter_files():
-            if path not in arguments:
-                arguments += ['--params-file', path]
+    arguments = ['rviz-config-test', *in_process_arguments(nodes)]
     context = rclpy.Context()
     rclpy.init(args=arguments, context=context, domain_id=domain)
     found: dict[str, list] = {}
