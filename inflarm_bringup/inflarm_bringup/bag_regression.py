@@ -1,0 +1,509 @@
+"""``inflarm-bag-regression``: replay a bag's inputs into the estimation and control nodes and
+compare their outputs with the recorded ones.
+
+Usage::
+
+    inflarm-bag-regression BAG [--nodes load_estimator,elastostatic_ik,pressure_controller]
+                               [--params-file F ...] [--out DIR] [--tolerance SPEC ...]
+
+    # e.g. a run recorded with bag_recorder, the controller's trials 5 s long in that run:
+    inflarm-bag-regression run1 --params-file my_params.yaml --tolerance pressure=50
+
+BAG is a rosbag2 directory (sqlite3 or MCAP) recorded from a running system, holding the
+inputs of the nodes under test and their outputs. Exit status: 0 when every compared topic is
+within tolerance, 1 when one is not, 2 on bad arguments, an unreadable bag, a bag without the
+topics a node needs, or a node that cannot be built from its parameters.
+
+Nodes under test (`NODES`): ``load_estimator``, ``elastostatic_ik``, ``pressure_controller``, the
+classes as they are, each with the parameter files the system gives it (``inflatable_arm.yaml``,
+its installed ``config/<node>.yaml``, ``soft_arm.yaml`` for the controller:
+``inflarm_bringup.systems``) and then ``--params-file`` (files keyed by node name or ``/**``;
+pass what the recorded run was started with). Each node's input and output topics are read off
+the node after construction (its subscriptions and publishers). Without ``--nodes``, a node
+runs when the bag holds one of its inputs (or another node under test publishes one) and one of
+its outputs, or when it feeds such a node an input the bag lacks. An output of a node under
+test that another one subscribes to comes from the replay, not from the bag (e.g.
+``estimated_wrench`` into ``elastostatic_ik``); the recorded copy is only compared.
+
+Replay (`replay`), in this process and deterministic: the nodes run in a private rclpy context
+with DDS discovery off, with ``use_sim_time``, and are never spun. The bag's inputs are handed,
+in record-time order, straight to the callbacks of the nodes' own subscriptions, as messages
+rclpy deserializes from the recorded CDR; before each, the nodes' clocks are set to its record
+time (a ``rosgraph_msgs/Clock`` on their own ``/clock`` subscriptions), so their stamps,
+freshness checks and timeouts see the recorded time. Each timer's callback is called when the
+simulated time reaches its due time, before any input recorded at or after it. What a node
+publishes is captured (canonical CDR, stamped with the simulated time) and handed to the nodes
+under test that subscribe to it before time moves on. So each input is consumed, each timer
+due has fired and each output has been delivered before the next event: two replays give the
+same bytes.
+
+Why hand messages to the callbacks instead of sending them over DDS: a DDS replay in lock step
+needs a barrier on every message into and out of every node (best-effort topics may drop them
+under load, a depth-1 command topic overwrites them, and an rclpy executor orders ready
+timers and subscriptions by its own rules), and the nodes' outputs would reach any system
+running on the same domain. Direct delivery gives one order, the bag's, with the same node
+code, the same message classes and the same callbacks (guarded: a bad recorded input is
+rejected with a warning, as in the running node). What it leaves out is DDS itself: QoS
+matching and queue depths.
+
+Timers follow the recording: a node's timer is due at ``phase + k period``, where the phase
+is taken from the recorded output of that node that is periodic at the timer's period (the
+earliest arrival modulo the period: a message is never recorded before its timer fired), e.g.
+``chamber_pressure_command`` for the controller's 5 Hz step; and where that output was
+recorded within half a period of a due time, the timer fires when it was recorded instead
+(just before it), so that a firing the loaded machine delayed in the recording is delayed
+alike, and sees the same inputs. Without such an output a timer is first due one period after
+the bag's first message.
+
+Comparison (``inflarm_bringup.bag_compare``): per output topic recorded in the bag, counts,
+messages matched by header stamp or by time, the largest difference per field against
+tolerances per quantity (positions [m/rad], forces [N], pressures [Pa], ...), optionally per
+topic (``--tolerance [TOPIC:]QUANTITY=VALUE``, repeatable). ``diagnostics`` is not compared
+(its counts depend on when its reports fell in the recording). ``--out DIR`` writes the
+replayed outputs as a bag (``DIR/replayed``) and the report (``DIR/report.md``,
+``DIR/report.csv``).
+"""
+
+import argparse
+from collections import Counter
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+import os
+import pathlib
+import sys
+
+import numpy as np
+
+from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, UNITS, Report, Tolerances, compare
+from inflarm_hw.bag import BagMessage, BagWriter, bag_info, read_messages
+
+__all__ = [
+    'INFRASTRUCTURE_TOPICS',
+    'NODES',
+    'NOT_COMPARED',
+    'NodeIo',
+    'Replay',
+    'TimerSchedule',
+    'compare',
+    'default_params_files',
+    'main',
+    'regression',
+    'replay',
+    'select_nodes',
+    'timer_due_times',
+    'timer_phase',
+]
+
+PROG = 'inflarm-bag-regression'
+#: Node name -> its class, as ``'module:Class'``.
+NODES: Mapping[str, str] = {
+    'load_estimator': 'inflarm_estimation.nodes.load_estimator:LoadEstimator',
+    'elastostatic_ik': 'inflarm_control.nodes.elastostatic_ik:ElastostaticIk',
+    'pressure_controller': 'inflarm_control.nodes.pressure_controller:PressureController',
+}
+#: Topics of the ROS plumbing: neither inputs nor outputs of a node under test.
+INFRASTRUCTURE_TOPICS = frozenset({'/clock', '/parameter_events', '/rosout'})
+#: Outputs replayed but not compared: counts since the last report, which depend on where the
+#: reports fell in the recording.
+NOT_COMPARED = frozenset({'/diagnostics'})
+# Burst grouping and grid test of `timer_phase`.
+_MIN_BURSTS = 3
+_ON_GRID = 0.2  # a gap is on the grid within this share of a period
+_ON_GRID_SHARE = 0.8  # the share of gaps on the grid for a periodic topic
+
+
+@dataclass(frozen=True)
+class NodeIo:
+    """A node's topics, read off the node: ``{topic: msgtype}`` in and out, timer periods."""
+
+    name: str
+    inputs: Mapping[str, str]
+    outputs: Mapping[str, str]
+    timer_periods_ns: tuple[int, ...] = ()
+
+    @property
+    def compared_outputs(self) -> list[str]:
+        return sorted(t for t in self.outputs if t not in NOT_COMPARED)
+
+
+@dataclass(frozen=True)
+class TimerSchedule:
+    """When a node's timer fires in the replay: ``due_ns``, on the grid ``phase_ns + k
+    period_ns`` or at the recorded output of ``aligned_to`` (None: the grid starts one period
+    after the bag's first message), ``recorded_firings`` of them."""
+
+    node: str
+    index: int
+    period_ns: int
+    phase_ns: int | None
+    aligned_to: str | None
+    due_ns: tuple[int, ...]
+    recorded_firings: int
+
+
+@dataclass(frozen=True)
+class Replay:
+    """A replay's outcome.
+
+    Attributes
+    ----------
+    bag : pathlib.Path
+    nodes : tuple of NodeIo
+        The nodes under test.
+    params_files : mapping of str to tuple of str
+        Node name -> the parameter files it was built with, in order.
+    inputs : mapping of str to int
+        Bag topic -> messages delivered from the bag.
+    timers : tuple of TimerSchedule
+    outputs : tuple of BagMessage
+        Everything the nodes published, in order, stamped with the simulated time [ns].
+    start_ns, end_ns : int
+        The simulated span (the bag's).
+    """
+
+    bag: pathlib.Path
+    nodes: tuple[NodeIo, ...]
+    params_files: Mapping[str, tuple[str, ...]]
+    inputs: Mapping[str, int]
+    timers: tuple[TimerSchedule, ...]
+    outputs: tuple[BagMessage, ...]
+    start_ns: int
+    end_ns: int
+
+    @property
+    def compared_topics(self) -> list[str]:
+        """The outputs of the nodes under test that are compared (diagnostics are not)."""
+        return sorted({t for io in self.nodes for t in io.compared_outputs})
+
+    def outputs_on(self, topic: str) -> list[BagMessage]:
+        return [m for m in self.outputs if m.topic == topic]
+
+
+def default_params_files(name: str) -> list[str]:
+    """The parameter files the simulated system starts node ``name`` with, in order."""
+    from inflarm_bringup.systems import sim
+
+    for node in sim():
+        if node.executable == name:
+            return node.parameter_files()
+    raise ValueError(f'{name} is not a node of the simulated system')
+
+
+def select_nodes(ios: Sequence[NodeIo], bag_topics: Mapping[str, str],
+                 requested: bool = False) -> tuple[NodeIo, ...]:
+    """The nodes a bag can test, in the order of ``ios``.
+
+    A node is tested when the bag holds one of its compared outputs and one of its inputs (or
+    another node of ``ios`` publishes one); a node is also run when it publishes an input of a
+    tested node that the bag lacks. With ``requested``, every node of ``ios`` must qualify.
+
+    Parameters
+    ----------
+    ios : sequence of NodeIo
+        The candidates.
+    bag_topics : mapping of str to str
+        The bag's topics and their types.
+    requested : bool
+        The candidates were asked for by name: one that does not qualify is an error.
+
+    Raises
+    ------
+    ValueError
+        When no node qualifies, a requested one does not (naming what it lacks), or a topic's
+        type in the bag differs from the node's.
+    """
+    def available(io: NodeIo) -> bool:
+        return any(t in bag_topics or any(t in o.outputs for o in ios if o is not io)
+                   for t in io.inputs)
+
+    def needs(io: NodeIo) -> str:
+        return (f'{io.name} needs one of its inputs {sorted(io.inputs)} and one of its outputs '
+                f'{io.compared_outputs} in the bag')
+
+    chosen = [io for io in ios if available(io)
+              and any(t in bag_topics for t in io.compared_outputs)]
+    while True:  # add the nodes that feed a chosen one an input the bag lacks
+        missing = {t for io in chosen for t in io.inputs if t not in bag_topics}
+        feeders = [io for io in ios if io not in chosen and available(io)
+                   and missing & set(io.outputs)]
+        if not feeders:
+            break
+        chosen += feeders
+    chosen = [io for io in ios if io in chosen]
+    held = f'the bag holds {sorted(bag_topics)}'
+    if requested and len(chosen) < len(ios):
+        raise ValueError('; '.join(needs(io) for io in ios if io not in chosen) + f'; {held}')
+    if not chosen:
+        raise ValueError('no node under test applies to this bag: '
+                         + '; '.join(needs(io) for io in ios) + f'; {held}')
+    produced = {t for io in chosen for t in io.outputs}
+    for io in chosen:
+        for topic, msgtype in io.inputs.items():
+            if topic in bag_topics and topic not in produced and bag_topics[topic] != msgtype:
+                raise ValueError(f'{topic} holds {bag_topics[topic]} in the bag, but '
+                                 f'{io.name} subscribes to it as {msgtype}')
+        for topic, msgtype in io.outputs.items():
+            if topic in bag_topics and bag_topics[topic] != msgtype:
+                raise ValueError(f'{topic} holds {bag_topics[topic]} in the bag, but '
+                                 f'{io.name} publishes it as {msgtype}')
+    return tuple(chosen)
+
+
+def timer_phase(times_ns: Sequence[int], period_ns: int) -> int | None:
+    """When a timer of ``period_ns`` that published at ``times_ns`` [ns] fired, or None when the
+    times are not periodic at that period.
+
+    Messages within half a period of a burst's first are one burst (one firing may publish
+    several messages). The bursts are periodic when at least 80 % of the gaps between them are
+    a whole number of periods, within 20 %. The phase is the earliest burst modulo the period:
+    delays (callback, transport, recorder) only ever make a message later than its firing.
+
+    Returns
+    -------
+    int or None
+        A time [ns] the timer was due at (it is due every ``period_ns`` from there).
+    """
+    starts = bursts(times_ns, period_ns)
+    if len(starts) < _MIN_BURSTS:
+        return None
+    s = np.asarray(starts, dtype=np.int64)
+    ratios = np.diff(s) / period_ns
+    on_grid = (np.abs(ratios - np.round(ratios)) <= _ON_GRID) & (np.round(ratios) >= 1)
+    if on_grid.mean() < _ON_GRID_SHARE:
+        return None
+    residues = (s - s[0] + period_ns // 2) % period_ns - period_ns // 2
+    return int(s[0] + residues.min())
+
+
+def bursts(times_ns: Sequence[int], period_ns: int) -> list[int]:
+    """The first of each group of ``times_ns`` within half of ``period_ns`` of it, sorted."""
+    if period_ns <= 0:
+        raise ValueError(f'expected period_ns > 0, got {period_ns!r}')
+    starts: list[int] = []
+    for t in sorted(int(t) for t in times_ns):
+        if not starts or t - starts[-1] >= period_ns // 2:
+            starts.append(t)
+    return starts
+
+
+def timer_due_times(period_ns: int, phase_ns: int | None, firings_ns: Sequence[int],
+                    start_ns: int, end_ns: int) -> tuple[list[int], int]:
+    """When a timer fires in a replay from ``start_ns`` to ``end_ns`` [ns].
+
+    On the grid ``phase_ns + k period_ns`` (``start_ns + period_ns`` on when ``phase_ns`` is
+    None), except where one of ``firings_ns`` (recorded outputs of the timer, `bursts`) is
+    within half a period of a grid time: then 1 ns before that recorded output.
+
+    Returns
+    -------
+    due : list of int
+        Increasing due times [ns] up to ``end_ns``.
+    recorded : int
+        How many of them are recorded firings.
+    """
+    if period_ns <= 0:
+        raise ValueError(f'expected period_ns > 0, got {period_ns!r}')
+    first = (start_ns + period_ns if phase_ns is None
+             else phase_ns + -(-(start_ns - phase_ns) // period_ns) * period_ns)
+    grid = np.arange(first, end_ns + 1, period_ns, dtype=np.int64)
+    fired = np.asarray(sorted(firings_ns), dtype=np.int64)
+    due, recorded = [], 0
+    for g in grid.tolist():
+        k = int(np.searchsorted(fired, g))
+        near = [int(f) for f in fired[max(k - 1, 0):k + 1] if abs(int(f) - g) < period_ns // 2]
+        t = min(near, key=lambda f: abs(f - g)) - 1 if near else g
+        if (not due or t > due[-1]) and start_ns <= t <= end_ns:
+            due.append(t)
+            recorded += bool(near)
+    return due, recorded
+
+
+def _schedules(io: NodeIo, recorded_times: Mapping[str, Sequence[int]], start_ns: int,
+               end_ns: int) -> list[TimerSchedule]:
+    schedules = []
+    for index, period in enumerate(io.timer_periods_ns):
+        phase = topic = None
+        for candidate in sorted(io.outputs, key=lambda t: -len(recorded_times.get(t, ()))):
+            phase = timer_phase(recorded_times.get(candidate, ()), period)
+            if phase is not None:
+                topic = candidate
+                break
+        firings = bursts(recorded_times[topic], period) if topic else []
+        due, recorded = timer_due_times(period, phase, firings, start_ns, end_ns)
+        schedules.append(TimerSchedule(io.name, index, period, phase, topic, tuple(due),
+                                       recorded))
+    return schedules
+
+
+def _counted(messages: Iterable[BagMessage], counts: Counter) -> Iterator[BagMessage]:
+    for m in messages:
+        counts[m.topic] += 1
+        yield m
+
+
+def replay(bag: str | os.PathLike, nodes: Sequence[str] | None = None,
+           params_files: Sequence[str | os.PathLike] = ()) -> Replay:
+    """Replay the inputs of ``bag`` into the nodes under test, in lock step (module docstring).
+
+    Parameters
+    ----------
+    bag : path-like
+        A rosbag2 directory.
+    nodes : sequence of str, optional
+        Names from `NODES`; default: those the bag's topics apply to (`select_nodes`).
+    params_files : sequence of path-like
+        Parameter files for every node, after the system's files.
+
+    Returns
+    -------
+    Replay
+
+    Raises
+    ------
+    ValueError
+        On an unreadable bag, an unknown node, a missing parameter file, a bag without the
+        topics a node needs, or a node that cannot be built from its parameters.
+    """
+    info = bag_info(bag)
+    files = [str(f) for f in params_files]
+    for f in files:
+        if not os.path.isfile(f):
+            raise ValueError(f'parameter file {f!r} does not exist')
+    names = list(NODES) if nodes is None else list(dict.fromkeys(nodes))
+    unknown = [n for n in names if n not in NODES]
+    if unknown or not names:
+        raise ValueError(f'unknown nodes {unknown}: expected some of {list(NODES)}')
+    node_files = {n: tuple([*default_params_files(n), *files]) for n in names}
+    from inflarm_bringup.ros.lockstep import LockstepNodes
+
+    with LockstepNodes({n: NODES[n] for n in names}, node_files) as nodes_under_test:
+        chosen = select_nodes([nodes_under_test.io(n) for n in names],
+                              {t: i.msgtype for t, i in info.topics.items()},
+                              requested=nodes is not None)
+        nodes_under_test.keep(io.name for io in chosen)
+        produced = {t for io in chosen for t in io.outputs}
+        input_topics = sorted({t for io in chosen for t in io.inputs
+                               if t in info.topics and t not in produced})
+        recorded_times: dict[str, list[int]] = {}
+        for m in read_messages(bag, sorted(produced & set(info.topics))):
+            recorded_times.setdefault(m.topic, []).append(m.timestamp_ns)
+        end_ns = info.start_ns + info.duration_ns
+        timers = tuple(s for io in chosen
+                       for s in _schedules(io, recorded_times, info.start_ns, end_ns))
+        counts: Counter[str] = Counter()
+        nodes_under_test.run(_counted(read_messages(bag, input_topics), counts), info.start_ns,
+                             end_ns, {(s.node, s.index): s.due_ns for s in timers})
+        outputs = tuple(nodes_under_test.outputs)
+    return Replay(pathlib.Path(bag), chosen, {io.name: node_files[io.name] for io in chosen},
+                  {t: counts[t] for t in input_topics}, timers, outputs, info.start_ns, end_ns)
+
+
+def regression(bag: str | os.PathLike, result: Replay,
+               tolerances: Tolerances = DEFAULT_TOLERANCES) -> Report:
+    """Compare the replay ``result`` with the outputs recorded in ``bag``: every compared
+    output topic of the nodes under test that the bag holds."""
+    info = bag_info(bag)
+    topics = [t for t in result.compared_topics if t in info.topics]
+    report = compare(read_messages(bag, topics), result.outputs, tolerances, topics)
+    not_compared = tuple(t for t in result.compared_topics if t not in info.topics)
+    return Report(report.topics, not_compared)
+
+
+def write_outputs(out: pathlib.Path, bag: str | os.PathLike, result: Replay,
+                  report: Report) -> None:
+    """``out/replayed`` (a bag of the replayed outputs, with the recorded QoS where the bag
+    has the topic), ``out/report.md`` and ``out/report.csv``."""
+    info = bag_info(bag)
+    out.mkdir(parents=True, exist_ok=True)
+    with BagWriter(out / 'replayed') as writer:
+        for topic, msgtype in sorted({(m.topic, m.msgtype) for m in result.outputs}):
+            recorded = info.topics.get(topic)
+            writer.add_topic(topic, msgtype, recorded.offered_qos if recorded else ())
+        for m in result.outputs:
+            writer.write(m.topic, m.timestamp_ns, m.data)
+    (out / 'report.md').write_text(f'# Bag regression of `{bag}`\n\n{describe(result)}\n\n'
+                                   f'{report.markdown()}', encoding='utf-8')
+    (out / 'report.csv').write_text(report.csv(), encoding='utf-8')
+
+
+def describe(result: Replay) -> str:
+    """What was replayed: the nodes, the inputs from the bag, the timers."""
+    inputs = ', '.join(f'{t} ({n})' for t, n in result.inputs.items()) or 'none'
+    timers = ', '.join(
+        f'{s.node} {s.period_ns * 1e-9:g} s '
+        + (f'aligned to {s.aligned_to} ({s.recorded_firings} of {len(s.due_ns)} firings as '
+           'recorded)' if s.aligned_to else 'from the start')
+        for s in result.timers) or 'none'
+    return '\n'.join([
+        f'nodes under test: {", ".join(io.name for io in result.nodes)}',
+        f'simulated time: {(result.end_ns - result.start_ns) * 1e-9:.3f} s',
+        f'inputs from the bag: {inputs}',
+        f'timers: {timers}',
+        f'outputs replayed: {len(result.outputs)}'])
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Command-line parser of ``inflarm-bag-regression``."""
+    parser = argparse.ArgumentParser(
+        prog=PROG, description='Replay the inputs recorded in a bag into the estimation and '
+        'control nodes, in lock step on the recorded time, and compare their outputs with '
+        'the recorded ones.',
+        epilog=f'Exit status: 0 within tolerance, 1 not, 2 bad arguments or bag. Tolerance '
+        f'quantities: {", ".join(f"{q} [{u}]" if u else q for q, u in UNITS.items())}; '
+        f'defaults: {", ".join(f"{k}={v:g}" for k, v in DEFAULT_TOLERANCES.values.items())}.')
+    parser.add_argument('bag', help='rosbag2 directory (sqlite3 or MCAP)')
+    parser.add_argument('--nodes', default=None,
+                        help=f'comma-separated nodes to test, of {",".join(NODES)} '
+                             "(default: those the bag's topics apply to)")
+    parser.add_argument('--params-file', action='extend', nargs='+', default=[], metavar='F',
+                        help='parameter file for the nodes (after their installed configs); '
+                             'repeatable')
+    parser.add_argument('--out', default=None, metavar='DIR',
+                        help='write the replayed outputs (DIR/replayed, a bag) and the report '
+                             '(DIR/report.md, DIR/report.csv)')
+    parser.add_argument('--tolerance', action='extend', nargs='+', default=[],
+                        metavar='[TOPIC:]QUANTITY=VALUE',
+                        help="absolute tolerance in SI units, e.g. 'force=0.01' or "
+                             "'estimated_wrench:force=0.1'; 'unmatched=0.1' is the share of "
+                             'messages allowed unmatched; repeatable')
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the tool; returns the exit status (0 within tolerance, 1 not, 2 bad arguments)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits on --help and usage errors
+        return int(exc.code) if isinstance(exc.code, int) else 2
+    try:
+        tolerances = DEFAULT_TOLERANCES.updated(args.tolerance)
+        nodes = None
+        if args.nodes is not None:
+            nodes = [n.strip() for n in args.nodes.split(',') if n.strip()]
+            if not nodes or any(n not in NODES for n in nodes):
+                raise ValueError(f'--nodes: expected names of {list(NODES)}, got '
+                                 f'{args.nodes!r}')
+        out = pathlib.Path(args.out) if args.out else None
+        if out is not None and (out / 'replayed').exists():
+            raise ValueError(f"--out: {str(out / 'replayed')!r} exists: a bag is never "
+                             'written over')
+        result = replay(args.bag, nodes, args.params_file)
+    except ValueError as err:
+        print(f'{PROG}: error: {err}', file=sys.stderr)
+        return 2
+    report = regression(args.bag, result, tolerances)
+    print(f'{PROG}: {args.bag}\n{describe(result)}\n')
+    print(report.table())
+    if out is not None:
+        try:
+            write_outputs(out, args.bag, result, report)
+        except (OSError, ValueError) as err:
+            print(f'{PROG}: error: cannot write {out}: {err}', file=sys.stderr)
+            return 2
+        print(f'wrote {out / "replayed"}, {out / "report.md"}, {out / "report.csv"}')
+    return 0 if report.passed else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

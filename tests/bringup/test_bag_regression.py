@@ -1,0 +1,188 @@
+"""inflarm-bag-regression: a simulated run recorded with bag_recorder (real processes over real
+DDS) replays within tolerance, identically twice, fails on a changed parameter naming the topic,
+and rejects a bag without the topics the nodes need."""
+
+import pathlib
+import signal
+
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
+from nav_msgs.msg import Path
+import numpy as np
+import pytest
+import rclpy
+from rclpy.duration import Duration
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+import yaml
+
+from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, QUANTITIES, compare, flatten
+from inflarm_bringup.bag_regression import main, regression, replay, select_nodes, timer_phase
+from inflarm_bringup.bag_regression import NodeIo
+from inflarm_hw.bag import BagWriter, bag_info, deserialize, read_messages
+from inflarm_msgs_json import ControlTask, TrialReport, decode
+from inflarm_msgs_json.ros.conversions import to_string_msg
+from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
+from ros_harness import spin_until
+
+pytestmark = pytest.mark.system
+ARM_CONFIG = ('inflarm_model', 'inflatable_arm.yaml')
+INPUTS = ['joint_states', 'tip_trajectory', 'ball_position', 'control_task']
+OUTPUTS = ['estimated_joint_states', 'estimated_wrench', 'estimated_tip', 'link_status',
+           'motor_position_command', 'chamber_pressure_command', 'trial_report']
+TRIAL_S = 4.0
+TARGET = (0.100, 0.110, 0.670)
+# The run's parameters that differ from the installed configs: what a user passes with
+# --params-file to replay their own run.
+RUN_PARAMETERS = {'pressure_controller': {'trial_duration_s': TRIAL_S}}
+_recording: dict[str, pathlib.Path] = {}  # the run, recorded once for this module
+
+
+def _stop(process) -> int:
+    process.send_signal(signal.SIGINT)
+    return process.wait(timeout=15.0)
+
+
+def record_run(node_processes, executor, bag: pathlib.Path, params_file: pathlib.Path) -> None:
+    """Both simulated arms with their estimator and controllers, recorded by bag_recorder: a
+    tip trajectory for the inflatable arm, a PID trial for the soft arm."""
+    from ament_index_python.packages import get_package_share_directory
+    arm_yaml = f'{get_package_share_directory(ARM_CONFIG[0])}/config/{ARM_CONFIG[1]}'
+    probe = rclpy.create_node('probe', context=executor.context)
+    tips: list[PointStamped] = []
+    wrenches: list[WrenchStamped] = []
+    reports: list[TrialReport] = []
+    commands: list[JointState] = []
+    probe.create_subscription(PointStamped, 'tip_position_truth', tips.append, SENSOR_QOS)
+    probe.create_subscription(WrenchStamped, 'estimated_wrench', wrenches.append, RELIABLE_QOS)
+    probe.create_subscription(JointState, 'motor_position_command', commands.append,
+                              COMMAND_QOS)
+    probe.create_subscription(String, 'trial_report', lambda m: reports.append(decode(m.data)),
+                              RELIABLE_QOS)
+    path_pub = probe.create_publisher(Path, 'tip_trajectory', RELIABLE_QOS)
+    task_pub = probe.create_publisher(String, 'control_task', RELIABLE_QOS)
+    executor.add_node(probe)
+
+    for node in ('load_estimator', 'elastostatic_ik'):
+        node_processes.start('inflarm_control' if node == 'elastostatic_ik'
+                             else 'inflarm_estimation', node, '--params-file', arm_yaml)
+    node_processes.start('inflarm_hw', 'arm_sim', '--params-file', arm_yaml,
+                         parameters={'seed': 7})
+    # The camera measurement at 20 Hz, the controller at 5 Hz (its installed rate).
+    node_processes.start('inflarm_hw', 'sra_sim', parameters={
+        'seed': 7, 'camera.enabled': False, 'camera_rate_hz': 20.0})
+    node_processes.start('inflarm_control', 'pressure_controller', '--params-file',
+                         str(params_file))
+    node_processes.start('inflarm_hw', 'bag_recorder', parameters={
+        'topics': INPUTS + OUTPUTS, 'output': str(bag)})
+    for topic in INPUTS + OUTPUTS:
+        assert node_processes.wait_for_output(f'recording /{topic}', 30.0), \
+            node_processes.output()
+    # The IK and the controller hear the probe (and so does the recorder).
+    assert spin_until(executor, lambda: path_pub.get_subscription_count() == 2
+                      and task_pub.get_subscription_count() == 2, timeout_s=15.0)
+    # A second of estimates past their start-up backlog: the IK has a load by then.
+    assert spin_until(executor, lambda: tips and len(wrenches) >= 50, timeout_s=20.0), \
+        node_processes.output()
+
+    # A 2 s path from where the tip is, due 0.5 s after it is sent (as tip_path_demo does).
+    start = np.array([tips[-1].point.x, tips[-1].point.y, tips[-1].point.z])
+    due = probe.get_clock().now() + Duration(seconds=0.5)
+    path = Path()
+    path.header.stamp, path.header.frame_id = due.to_msg(), 'base_link'
+    for t in np.linspace(0.0, 2.0, 20):
+        pose = PoseStamped()
+        pose.header.stamp, pose.header.frame_id = (due + Duration(seconds=t)).to_msg(), 'base_link'
+        point = start + t / 2.0 * np.array([-0.03, 0.08, -0.03])
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = point.tolist()
+        pose.pose.orientation.w = 1.0
+        path.poses.append(pose)
+    path_pub.publish(path)
+    commands_before = len(commands)
+    task_pub.publish(to_string_msg(ControlTask(frame_id='sra_mount', target=TARGET, mode='pid',
+                                               trial_id=0)))
+    assert spin_until(executor, lambda: reports and len(commands) > commands_before + 100,
+                      timeout_s=TRIAL_S + 15.0), node_processes.output()
+    spin_until(executor, lambda: False, timeout_s=0.5)  # the held commands after the trial
+    assert _stop(node_processes.group.processes['bag_recorder']) == 0, node_processes.output()
+    executor.remove_node(probe)
+    probe.destroy_node()
+
+
+@pytest.fixture
+def recorded(node_processes, executor, tmp_path_factory):
+    """(bag, parameter file) of the simulated run, recorded by the first test that asks."""
+    if not _recording:
+        root = tmp_path_factory.mktemp('regression')
+        params_file = root / 'run_parameters.yaml'
+        params_file.write_text(yaml.safe_dump(
+            {node: {'ros__parameters': values} for node, values in RUN_PARAMETERS.items()}))
+        record_run(node_processes, executor, root / 'run', params_file)
+        _recording.update(bag=root / 'run', params_file=params_file)
+    return _recording['bag'], _recording['params_file']
+
+
+def test_the_recorded_run_replays_within_tolerance(recorded, tmp_path, capsys):
+    bag, params_file = recorded
+    info = bag_info(bag)
+    assert {f'/{t}' for t in INPUTS + OUTPUTS} <= set(info.topics), info.topics
+    out = tmp_path / 'out'
+    code = main([str(bag), '--params-file', str(params_file), '--out', str(out)])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    assert 'nodes under test: load_estimator, elastostatic_ik, pressure_controller' in printed
+    assert f'PASS: {len(OUTPUTS)} topics within tolerance' in printed
+    # The pressure controller's 5 Hz step was aligned with its recorded commands.
+    assert 'pressure_controller 0.2 s aligned to /chamber_pressure_command' in printed
+    assert 'elastostatic_ik 0.02 s aligned to /motor_position_command' in printed
+    replayed = bag_info(out / 'replayed')
+    for topic in OUTPUTS:
+        assert replayed.topics[f'/{topic}'].message_count > 0, topic
+    assert (out / 'report.md').read_text().count('| ok |') >= len(OUTPUTS)
+    assert (out / 'report.csv').read_text().startswith('topic,type,key,recorded')
+    # The estimates are of the recorded samples: matched by their stamps, one for one.
+    report = regression(bag, replay(bag, params_files=[params_file]))
+    wrench = next(t for t in report.topics if t.topic == '/estimated_wrench')
+    assert wrench.key == 'stamp' and wrench.matched >= 0.95 * wrench.recorded > 100
+    trial = next(t for t in report.topics if t.topic == '/trial_report')
+    assert trial.recorded == trial.replayed == trial.matched == 1
+
+
+def test_two_replays_give_identical_outputs(recorded):
+    bag, params_file = recorded
+    first = replay(bag, params_files=[params_file])
+    second = replay(bag, params_files=[params_file])
+    assert len(first.outputs) > 500
+    assert first.outputs == second.outputs  # topics, times and CDR bytes
+    assert first.inputs == second.inputs and first.timers == second.timers
+
+
+def test_a_changed_spring_stiffness_fails_naming_the_topics(recorded, tmp_path, capsys):
+    bag, params_file = recorded
+    stiffer = tmp_path / 'stiffer.yaml'
+    stiffer.write_text(yaml.safe_dump({'load_estimator': {'ros__parameters': {
+        'arm.spring_stiffness': [190.0, 190.0, 190.0, 190.0]}}}))
+    code = main([str(bag), '--nodes', 'load_estimator', '--params-file', str(params_file),
+                 str(stiffer)])
+    printed = capsys.readouterr().out
+    assert code == 1, printed
+    assert 'FAIL /estimated_wrench: wrench.force differs by' in printed
+    assert 'FAIL /estimated_joint_states: position differs by' in printed
+    assert 'nodes under test: load_estimator\n' in printed
+
+
+def test_a_bag_without_the_needed_topics_is_rejected_with_what_is_missing(tmp_path, capsys):
+    bag = tmp_path / 'truth_only'
+    with BagWriter(bag) as writer:
+        writer.add_topic('/tip_position_truth', 'geometry_msgs/msg/PointStamped')
+    assert main([str(bag)]) == 2
+    err = capsys.readouterr().err
+    assert 'no node under test applies to this bag' in err
+    assert "load_estimator needs one of its inputs ['/joint_states']" in err
+    assert "the bag holds ['/tip_position_truth']" in err
+
+    assert main([str(tmp_path / 'missing')]) == 2
+    assert 'no bag at' in capsys.readouterr().err
+    assert main([str(bag), '--nodes', 'load_estimator,planner']) == 2
+    assert '--nodes: expected names of' in capsys.readouterr().err
+    assert main([str(bag), '--tolerance', 'force:0.1']) == 2
+    assert 'expected [TOPIC:]QUANTITY=VALUE' in capsys.readouterr().err
