@@ -1,8 +1,8 @@
 """Speed of the inflatable-arm kinematics (inflarm_model.kinematics).
 
-Run as ``python benchmarks/bench_kinematics.py`` (with inflarm_model importable, e.g.
-``PYTHONPATH=inflarm_model``). Prints medians in microseconds and ratios against baselines
-measured in the same run:
+Run as ``source scripts/env.sh && python benchmarks/bench_kinematics.py [--rounds 31]
+[--batch 10000]``. Prints medians in microseconds and ratios against baselines measured in the
+same run:
 
 - one call of ``FlexibleArm.fk_and_jacobian`` against a bare Pinocchio
   ``computeFrameJacobian`` call on the same model (target: ratio <= 1.5) and against the plain
@@ -10,15 +10,14 @@ measured in the same run:
   its last frame);
 - the vectorized batch forms per configuration for N = 10,000 (target: <= 1 us each).
 
-Candidates are timed round-robin, one ``timeit`` batch each per round, so that load from other
-processes on the machine falls on all of them alike; the median over rounds is reported.
+Candidates are timed round-robin (``common.interleaved``), so that load from other processes on
+the machine falls on all of them alike; the median over rounds is reported.
 """
 
 import argparse
-import statistics
 import sys
-import timeit
 
+from common import Row, Target, interleaved, print_rows
 import numpy as np
 import pinocchio as pin
 
@@ -26,34 +25,35 @@ from inflarm_model.kinematics import FlexibleArm, dh_fk_reference, dh_jacobian_r
 
 TARGET_SINGLE_RATIO = 1.5
 TARGET_BATCH_US = 1.0
+BARE = 'bare pin.computeFrameJacobian'
+SINGLE = {
+    BARE: 'pin.computeFrameJacobian(model, data, q, frame_id, pin.LOCAL_WORLD_ALIGNED)',
+    'bare J + pose, data.oMf[tip] indexed': (
+        'pin.computeFrameJacobian(model, data, q, frame_id, pin.LOCAL_WORLD_ALIGNED); '
+        'data.oMf[frame_id].homogeneous'
+    ),
+    'bare J + pose, cached oMf reference': (
+        'pin.computeFrameJacobian(model, data, q, frame_id, pin.LOCAL_WORLD_ALIGNED); '
+        'tip.homogeneous'
+    ),
+    'FlexibleArm.fk_and_jacobian': 'arm.fk_and_jacobian(q)',
+    'FlexibleArm.fk': 'arm.fk(q)',
+    'FlexibleArm.jacobian': 'arm.jacobian(q)',
+    'numpy DH chain (dh_jacobian_reference)': 'dh_jacobian_reference(table, q)',
+}
+BATCH = {
+    'fk_batch': 'arm.fk_batch(Q)',
+    'jacobian_batch': 'arm.jacobian_batch(Q)',
+    'fk_and_jacobian_batch': 'arm.fk_and_jacobian_batch(Q)',
+}
 
 
-def interleaved_medians(
-    candidates: dict[str, str], namespace: dict, rounds: int, min_time_s: float
-) -> dict[str, float]:
-    """Median time per call [us] of each statement, timed round-robin."""
-    timers = {name: timeit.Timer(stmt, globals=namespace) for name, stmt in candidates.items()}
-    numbers = {}
-    for name, timer in timers.items():
-        n, t = timer.autorange()
-        numbers[name] = max(1, int(n * min_time_s / t))
-    samples: dict[str, list[float]] = {name: [] for name in timers}
-    for _ in range(rounds):
-        for name, timer in timers.items():
-            samples[name].append(timer.timeit(numbers[name]) / numbers[name] * 1e6)
-    return {name: statistics.median(s) for name, s in samples.items()}
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--rounds', type=int, default=31, help='round-robin rounds')
-    parser.add_argument('--batch', type=int, default=10_000, help='N for the batch forms')
-    args = parser.parse_args(argv)
-
+def measure(rounds: int, batch: int, min_time_s: float) -> tuple[dict, dict]:
+    """Median time per call [us] of each single call and per configuration of each batch form."""
     rng = np.random.default_rng(7)
     arm = FlexibleArm(link_length=0.6, spring_offset=0.03)
     q = rng.uniform(-np.pi, np.pi, arm.n_joints)
-    Q = rng.uniform(-np.pi, np.pi, (args.batch, arm.n_joints))
+    Q = rng.uniform(-np.pi, np.pi, (batch, arm.n_joints))
     # Bare Pinocchio: same model, its own workspace, the call as a user writes it.
     model = arm.model
     data = model.createData()
@@ -64,62 +64,58 @@ def main(argv: list[str] | None = None) -> int:
         'frame_id': frame_id, 'tip': tip, 'table': arm.dh_table,
         'dh_jacobian_reference': dh_jacobian_reference, 'dh_fk_reference': dh_fk_reference,
     }
+    single = interleaved(SINGLE, rounds, min_time_s=min_time_s, namespace=namespace)
+    batched = interleaved(BATCH, max(5, rounds // 3), min_time_s=2.5 * min_time_s,
+                          namespace=namespace)
+    return ({name: t.median_us for name, t in single.items()},
+            {name: t.median_us / batch for name, t in batched.items()})
 
-    single = interleaved_medians(
-        {
-            'bare pin.computeFrameJacobian': (
-                'pin.computeFrameJacobian(model, data, q, frame_id, pin.LOCAL_WORLD_ALIGNED)'
-            ),
-            'bare J + pose, data.oMf[tip] indexed': (
-                'pin.computeFrameJacobian(model, data, q, frame_id, pin.LOCAL_WORLD_ALIGNED); '
-                'data.oMf[frame_id].homogeneous'
-            ),
-            'bare J + pose, cached oMf reference': (
-                'pin.computeFrameJacobian(model, data, q, frame_id, pin.LOCAL_WORLD_ALIGNED); '
-                'tip.homogeneous'
-            ),
-            'FlexibleArm.fk_and_jacobian': 'arm.fk_and_jacobian(q)',
-            'FlexibleArm.fk': 'arm.fk(q)',
-            'FlexibleArm.jacobian': 'arm.jacobian(q)',
-            'numpy DH chain (dh_jacobian_reference)': 'dh_jacobian_reference(table, q)',
-        },
-        namespace, args.rounds, min_time_s=0.02,
-    )
-    bare = single['bare pin.computeFrameJacobian']
+
+def rows(single: dict, batch: dict, n: int) -> list[Row]:
+    """The headline rows: one call against bare Pinocchio and the numpy chain, the batch forms
+    against one call per configuration."""
+    ours = single['FlexibleArm.fk_and_jacobian']
+    loop = 'one fk_and_jacobian call per configuration'
+    return [
+        Row('FlexibleArm.fk_and_jacobian, one call', ours, 'us', BARE, single[BARE],
+            Target(ratio_at_most=TARGET_SINGLE_RATIO), '7 DOF, median of round-robin rounds'),
+        Row('FlexibleArm.fk_and_jacobian, one call', ours, 'us',
+            'bare J + pose, cached oMf reference',
+            single['bare J + pose, cached oMf reference'], note='the same outputs, unvalidated'),
+        Row('numpy DH chain (dh_jacobian_reference)',
+            single['numpy DH chain (dh_jacobian_reference)'], 'us',
+            'FlexibleArm.fk_and_jacobian', ours),
+    ] + [Row(f'{name}, per configuration', t, 'us', loop, ours, Target(at_most=TARGET_BATCH_US),
+             f'N = {n}') for name, t in batch.items()]
+
+
+def run(quick: bool) -> list[Row]:
+    """Rows of the summary table (--quick: 3 rounds, N = 1,000, short batches)."""
+    rounds, n, min_time_s = (3, 1000, 0.005) if quick else (31, 10_000, 0.02)
+    return rows(*measure(rounds, n, min_time_s), n)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rounds', type=int, default=31, help='round-robin rounds')
+    parser.add_argument('--batch', type=int, default=10_000, help='N for the batch forms')
+    args = parser.parse_args(argv)
+
+    single, batch = measure(args.rounds, args.batch, 0.02)
+    bare = single[BARE]
     print(f'single configuration, FlexibleArm (7 DOF), median of {args.rounds} rounds')
     print(f'{"call":42s} {"us/call":>9s} {"x bare J":>11s}')
     for name, t in single.items():
         print(f'{name:42s} {t:9.3f} {t / bare:11.2f}')
-    ours = single['FlexibleArm.fk_and_jacobian']
-    ratio = ours / bare
-    verdict = 'met' if ratio <= TARGET_SINGLE_RATIO else 'NOT met'
-    print(f'fk_and_jacobian / bare computeFrameJacobian = {ratio:.2f} '
-          f'(target <= {TARGET_SINGLE_RATIO}: {verdict})')
-    same_outputs = single['bare J + pose, cached oMf reference']
-    print(f'fk_and_jacobian / bare J + pose (same outputs, unvalidated) = '
-          f'{ours / same_outputs:.2f}')
-    numpy_chain = single['numpy DH chain (dh_jacobian_reference)']
-    print(f'numpy DH chain / fk_and_jacobian = {numpy_chain / ours:.1f}')
-
-    batch = interleaved_medians(
-        {
-            'fk_batch': 'arm.fk_batch(Q)',
-            'jacobian_batch': 'arm.jacobian_batch(Q)',
-            'fk_and_jacobian_batch': 'arm.fk_and_jacobian_batch(Q)',
-        },
-        namespace, max(5, args.rounds // 3), min_time_s=0.05,
-    )
     loop = single['FlexibleArm.fk_and_jacobian']
     print()
     print(f'batch, N = {args.batch}, per configuration')
     print(f'{"call":42s} {"us/config":>9s} {"x loop":>11s}')
-    for name, t in batch.items():
-        per_config = t / args.batch
+    for name, per_config in batch.items():
         print(f'{name:42s} {per_config:9.3f} {per_config / loop:11.2f}')
-    worst = max(batch.values()) / args.batch
-    verdict = 'met' if worst <= TARGET_BATCH_US else 'NOT met'
-    print(f'(x loop: against one fk_and_jacobian call per configuration; '
-          f'target <= {TARGET_BATCH_US} us/config: {verdict})')
+    print('(x loop: against one fk_and_jacobian call per configuration)')
+    print()
+    print_rows('kinematics', rows(single, batch, args.batch))
     return 0
 
 

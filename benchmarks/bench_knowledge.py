@@ -2,50 +2,46 @@
 
 Prints, for the paper's full 67,200-point grid (a 32 MB file in a temporary directory):
 
-- lookup time per call [us] of ``KnowledgeDatabase.lookup`` against two baselines measured in the
-  same run: a nearest search with ``np.argmin`` over the points array, and a plain dict keyed by
-  the whole-centimetre coordinates (rounding + dict + decode, the cheapest Python alternative);
-- open time [ms] of the full file (target <= 50 ms), against ``np.fromfile`` reading it all;
+- lookup time per call [us] of ``KnowledgeDatabase.lookup`` (target <= 10 us) against two
+  baselines measured in the same run: a nearest search with ``np.argmin`` over the points
+  array, and a plain dict keyed by the whole-centimetre coordinates (rounding + dict + decode,
+  the cheapest Python alternative);
+- open time [ms] of the full file (target: the worst of 20 opens <= 50 ms), against
+  ``np.fromfile`` reading it all;
 - with ``--full-build``: wall time of ``build_knowledge_database`` over all 67,200 points
-  (target <= 120 s on the 2-core machine).
+  (target <= 120 s on the 2-core machine; ~90 s).
 
-Run: ``PYTHONPATH=inflarm_model:inflarm_control:inflarm_hw .venv/bin/python
-benchmarks/bench_knowledge.py [--full-build] [--batch-size N] [--workers N]``
+Passes over the same targets are timed round-robin (``common.interleaved``).
+
+Run: ``source scripts/env.sh && python benchmarks/bench_knowledge.py [--full-build]
+[--batch-size N] [--workers N]``
 """
 
 import argparse
 from pathlib import Path
-import statistics
+import sys
 import tempfile
 import time
-import timeit
 
+from common import Row, Target, interleaved, print_rows
 import numpy as np
 
+from inflarm_bringup.knowledge_cli import knowledge_plant
 from inflarm_control.knowledge import (
     DEFAULT_GRID,
     KnowledgeDatabase,
     build_knowledge_database,
     nearest_knowledge_point,
 )
-from inflarm_hw.sra_plant import SoftArmPlant
 
 LOOKUP_TARGET_US = 10.0
 OPEN_TARGET_MS = 50.0
 BUILD_TARGET_S = 120.0
 
 
-def per_call_us(fn, targets, repeat=5):
-    """Best of ``repeat`` passes over ``targets``, per call [us]."""
-
-    def one_pass():
-        for t in targets:
-            fn(t)
-
-    return min(timeit.repeat(one_pass, number=1, repeat=repeat)) / len(targets) * 1e6
-
-
-def bench_lookup_and_open(tmp: Path) -> None:
+def bench_lookup_and_open(tmp: Path, n_targets: int, n_argmin: int, rounds: int,
+                          opens: int) -> dict:
+    """Per call [us] of the lookups and their baselines; open and read-all times [ms]."""
     rng = np.random.default_rng(7)
     path = tmp / 'knowledge.db'
     with KnowledgeDatabase.create(path) as db:
@@ -54,19 +50,14 @@ def bench_lookup_and_open(tmp: Path) -> None:
             db.write(idx, rng.uniform(0.0, 40e3, size=(len(idx), 50, 5)))
     size_mb = path.stat().st_size / 1e6
 
-    opens = []
-    for _ in range(20):
-        t0 = time.perf_counter()
-        db = KnowledgeDatabase.open(path)
-        opens.append((time.perf_counter() - t0) * 1e3)
-        db.close()
-    t0 = time.perf_counter()
-    np.fromfile(path, dtype=np.uint8)
-    read_all_ms = (time.perf_counter() - t0) * 1e3
+    opening = interleaved({'open': lambda: KnowledgeDatabase.open(path).close(),
+                           'read all': lambda: np.fromfile(path, dtype=np.uint8)},
+                          opens, number=1)
 
     db = KnowledgeDatabase.open(path)
     lower, upper = np.array(DEFAULT_GRID.lower), np.array(DEFAULT_GRID.upper)
-    targets = [tuple(p) for p in rng.uniform(lower, upper - 1e-6, size=(2000, 3)).tolist()]
+    targets = [tuple(p) for p in rng.uniform(lower, upper - 1e-6, size=(n_targets, 3)).tolist()]
+    arrays = [np.array(t) for t in targets]
 
     points = DEFAULT_GRID.points()
     codes = db._data  # the same uint16 rows the database decodes
@@ -88,56 +79,99 @@ def bench_lookup_and_open(tmp: Path) -> None:
         np.testing.assert_allclose(p, q, atol=1e-12)
         np.testing.assert_allclose(m, n)
 
-    ours = per_call_us(db.lookup, targets)
-    ours_array = per_call_us(db.lookup, [np.array(t) for t in targets])
-    snap = per_call_us(nearest_knowledge_point, targets)
-    argmin = per_call_us(argmin_lookup, targets[:300], repeat=3)
-    dict_us = per_call_us(dict_lookup, targets)
+    def passes(fn, over):
+        def one_pass():
+            for t in over:
+                fn(t)
+        return one_pass
 
-    print(f'full grid: {DEFAULT_GRID.size} points, file {size_mb:.2f} MB')
-    print(
-        f'lookup (tuple)       {ours:8.2f} us   target <= {LOOKUP_TARGET_US:.0f} us'
-        f'  {"OK" if ours <= LOOKUP_TARGET_US else "SLOW"}'
-    )
-    print(f'lookup (ndarray)     {ours_array:8.2f} us')
-    print(f'nearest_knowledge_point {snap:5.2f} us')
-    print(f'baseline np.argmin   {argmin:8.2f} us   lookup is {argmin / ours:7.1f}x faster')
-    print(f'baseline dict        {dict_us:8.2f} us   lookup is {dict_us / ours:7.2f}x faster')
-    med = statistics.median(opens)
-    print(
-        f'open (median of 20)  {med:8.3f} ms   max {max(opens):.3f} ms'
-        f'   target <= {OPEN_TARGET_MS:.0f} ms  {"OK" if max(opens) <= OPEN_TARGET_MS else "SLOW"}'
-    )
-    print(f'baseline read all    {read_all_ms:8.3f} ms   open is {read_all_ms / med:7.1f}x faster')
+    lists = {'lookup': targets, 'lookup ndarray': arrays, 'nearest': targets,
+             'argmin': targets[:n_argmin], 'dict': targets}
+    fns = {'lookup': db.lookup, 'lookup ndarray': db.lookup, 'nearest': nearest_knowledge_point,
+           'argmin': argmin_lookup, 'dict': dict_lookup}
+    timing = interleaved({name: passes(fns[name], lists[name]) for name in lists}, rounds,
+                         number=1)
     db.close()
+    return {'size_mb': size_mb, 'targets': n_targets, 'opens': opens,
+            'open_median_ms': opening['open'].median_ms,
+            'open_worst_ms': opening['open'].worst_s * 1e3,
+            'read_all_ms': opening['read all'].median_ms,
+            **{name: timing[name].median_us / len(lists[name]) for name in lists}}
 
 
-def bench_full_build(tmp: Path, batch_size: int | None, workers: int) -> None:
+def bench_full_build(tmp: Path, batch_size: int | None, workers: int, progress: bool) -> dict:
+    """Wall time [s] of the full build."""
     path = tmp / 'built.db'
     kwargs = {} if batch_size is None else {'batch_size': batch_size}
     t0 = time.perf_counter()
-    db = build_knowledge_database(path, plant_factory=SoftArmPlant, progress=True,
+    db = build_knowledge_database(path, plant_factory=knowledge_plant, progress=progress,
                                   workers=workers, **kwargs)
     wall = time.perf_counter() - t0
-    print(
-        f'full build           {wall:8.1f} s    {db.n_filled} points x 30 trials x 10 s,'
-        f' batch {batch_size or "default"}, {workers} worker(s)   target <= {BUILD_TARGET_S:.0f} s'
-        f'  {"OK" if wall <= BUILD_TARGET_S else "SLOW"}'
-    )
+    filled = db.n_filled
     db.close()
+    return {'wall_s': wall, 'filled': filled, 'batch_size': batch_size, 'workers': workers}
 
 
-def main() -> None:
+def rows(lookup: dict, build: dict | None) -> list[Row]:
+    """The summary rows."""
+    grid = f"full grid, {DEFAULT_GRID.size} points, {lookup['size_mb']:.1f} MB"
+    out = [
+        Row('KnowledgeDatabase.lookup (tuple)', lookup['lookup'], 'us',
+            'dict keyed by whole centimetres', lookup['dict'], Target(at_most=LOOKUP_TARGET_US),
+            grid),
+        Row('KnowledgeDatabase.lookup (tuple)', lookup['lookup'], 'us',
+            'np.argmin nearest search', lookup['argmin']),
+        Row(f"KnowledgeDatabase.open, worst of {lookup['opens']}", lookup['open_worst_ms'], 'ms',
+            'np.fromfile of the whole file', lookup['read_all_ms'],
+            Target(at_most=OPEN_TARGET_MS), f"median {lookup['open_median_ms']:.3f} ms"),
+    ]
+    if build is not None:
+        out.append(Row(f"build_knowledge_database, {build['filled']} points", build['wall_s'],
+                       's', target=Target(at_most=BUILD_TARGET_S),
+                       note=f"30 trials x 10 s each, {build['workers']} worker(s)"))
+    return out
+
+
+def run(quick: bool) -> list[Row]:
+    """Rows of the summary table (--quick: fewer targets and rounds, no build; full: with the
+    full build, about 1.5 min)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        if quick:
+            return rows(bench_lookup_and_open(Path(tmp), 300, 30, 3, 5), None)
+        lookup = bench_lookup_and_open(Path(tmp), 2000, 300, 5, 20)
+        return rows(lookup, bench_full_build(Path(tmp), None, 2, progress=False))
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--full-build', action='store_true', help='time the 67,200-point build')
     parser.add_argument('--batch-size', type=int, default=None, help='arms simulated at once')
     parser.add_argument('--workers', type=int, default=2, help='build processes (2 cores)')
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
-        bench_lookup_and_open(Path(tmp))
-        if args.full_build:
-            bench_full_build(Path(tmp), args.batch_size, args.workers)
+        m = bench_lookup_and_open(Path(tmp), 2000, 300, 5, 20)
+        build = (bench_full_build(Path(tmp), args.batch_size, args.workers, progress=True)
+                 if args.full_build else None)
+    print(f"full grid: {DEFAULT_GRID.size} points, file {m['size_mb']:.2f} MB")
+    print(f"lookup (tuple)       {m['lookup']:8.2f} us   target <= {LOOKUP_TARGET_US:.0f} us")
+    print(f"lookup (ndarray)     {m['lookup ndarray']:8.2f} us")
+    print(f"nearest_knowledge_point {m['nearest']:5.2f} us")
+    print(f"baseline np.argmin   {m['argmin']:8.2f} us   lookup is "
+          f"{m['argmin'] / m['lookup']:7.1f}x faster")
+    print(f"baseline dict        {m['dict']:8.2f} us   lookup is "
+          f"{m['dict'] / m['lookup']:7.2f}x faster")
+    print(f"open (median of {m['opens']})  {m['open_median_ms']:8.3f} ms   max "
+          f"{m['open_worst_ms']:.3f} ms   target <= {OPEN_TARGET_MS:.0f} ms")
+    print(f"baseline read all    {m['read_all_ms']:8.3f} ms   open is "
+          f"{m['read_all_ms'] / m['open_median_ms']:7.1f}x faster")
+    if build is not None:
+        print(f"full build           {build['wall_s']:8.1f} s    {build['filled']} points x 30 "
+              f"trials x 10 s, batch {build['batch_size'] or 'default'}, {build['workers']} "
+              f"worker(s)   target <= {BUILD_TARGET_S:.0f} s")
+    print()
+    print_rows('knowledge', rows(m, build))
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -10,17 +10,18 @@ Prints, with baselines measured in the same run:
   against the cycle period at the default 100 Hz;
 - the link load at the defaults (100 Hz commands, 50 Hz STATE) against 921600 baud.
 
-Per-call figures are the best of 5 repeats, so other load on the machine inflates them less;
-compare the ratios more than the absolute numbers.
+Candidates are timed round-robin (``common.interleaved``); compare the ratios more than the
+absolute numbers.
 
 Run: ``source scripts/env.sh && python benchmarks/bench_mcu_link.py [--frames 20000]``
 """
 
 import argparse
-import timeit
+import sys
 import zlib
 
 from cobs import cobs
+from common import Row, interleaved, print_rows
 import numpy as np
 
 from inflarm_hw.bridge import BridgeConfig, SafetySupervisor
@@ -34,21 +35,16 @@ from inflarm_hw.mcu_protocol import (
     encode_frame,
 )
 
-
-def best(statement, number: int) -> float:
-    """Best of 5 repeats, seconds per call."""
-    return min(timeit.repeat(statement, number=number, repeat=5)) / number
+BAUD = 921600
+CYCLE_S = 1e-2  # the bridge's default 100 Hz
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--frames', type=int, default=20000)
-    args = parser.parse_args()
+def measure(frames: int, rounds: int) -> dict:
+    """Per frame or per cycle [s] of each candidate, and the link loads [B/s]."""
     rng = np.random.default_rng(7)
-
     states = [State(i, 1, i & 0xFFFF, 0, 0, rng.normal(size=3), rng.normal(size=3),
                     rng.normal(size=3), rng.uniform(0, 1e5, 5), rng.uniform(4e4, 6e4, 2))
-              for i in range(args.frames)]
+              for i in range(frames)]
     stream = b''.join(encode_frame(s, i) for i, s in enumerate(states))
     chunks = [stream[i:i + 4096] for i in range(0, len(stream), 4096)]
 
@@ -56,24 +52,13 @@ def main() -> None:
         decoder = FrameDecoder()
         for chunk in chunks:
             decoder.feed(chunk)
-        assert decoder.stats.frames == args.frames
+        assert decoder.stats.frames == frames
 
     def floor():
         for raw in map(cobs.decode, stream.split(b'\x00')[:-1]):
             zlib.crc32(raw[:-4])
 
-    t_decode = best(decode, 1) / args.frames
-    t_floor = best(floor, 1) / args.frames
-    print(f'decode: {t_decode * 1e6:.2f} us/frame ({len(stream) / args.frames:.0f} B), library '
-          f'floor {t_floor * 1e6:.2f} us/frame: x{t_decode / t_floor:.1f}')
-
     command = MotorCommand(MotorMode.POSITION, (0.1, 0.6, -1.2), (0.0, 0.1, 0.0))
-    t_encode = best(lambda: encode_frame(command, 7), 20000)
-    t_pack = best(lambda: command.LAYOUT.pack(1, 0.1, 0.6, -1.2, 0.0, 0.1, 0.0, 0.0, 0.0, 0.0),
-                  20000)
-    print(f'encode: {t_encode * 1e6:.2f} us/frame, struct.pack of the payload '
-          f'{t_pack * 1e6:.2f} us: x{t_encode / t_pack:.1f}')
-
     supervisor = SafetySupervisor(BridgeConfig(), DeviceInfo(1, 1, 0.25, 3, 5, 2))
     clock = [100.0]
     supervisor.on_pressure_command({'PEA': 20e3, 'B1': 30e3}, clock[0])
@@ -87,16 +72,61 @@ def main() -> None:
         supervisor.output(clock[0], True)
         supervisor.drain_events()
 
-    t_cycle = best(cycle, 2000)
-    print(f'bridge cycle (on_state + output): {t_cycle * 1e6:.0f} us, the 100 Hz period '
-          f'10000 us: {t_cycle / 1e-2 * 100:.2f} % of it')
-
+    streams = interleaved({'decode': decode, 'floor': floor}, rounds, number=1)
+    calls = interleaved({
+        'encode': lambda: encode_frame(command, 7),
+        'pack': lambda: command.LAYOUT.pack(1, 0.1, 0.6, -1.2, 0.0, 0.1, 0.0, 0.0, 0.0, 0.0),
+        'cycle': cycle,
+    }, rounds)
     tx = 100 * (len(encode_frame(command, 0)) + len(encode_frame(ValveCommand(), 0)))
     rx = 50 * len(encode_frame(states[0], 0))
-    line = 921600 / 10  # bytes/s, 8N1
-    print(f'link load: host -> MCU {tx} B/s, MCU -> host {rx} B/s; 921600 baud carries '
-          f'{line:.0f} B/s: {tx / line * 100:.1f} % and {rx / line * 100:.1f} %')
+    return {'frame_bytes': len(stream) / frames,
+            'decode': streams['decode'].median_s / frames,
+            'floor': streams['floor'].median_s / frames,
+            **{name: t.median_s for name, t in calls.items()},
+            'tx': tx, 'rx': rx, 'line': BAUD / 10}  # bytes/s, 8N1
+
+
+def rows(m: dict) -> list[Row]:
+    """The summary rows (no targets: the figures against their floors and the budgets)."""
+    return [
+        Row('FrameDecoder.feed, per STATE frame', m['decode'] * 1e6, 'us',
+            'bytes.split + cobs.decode + zlib.crc32', m['floor'] * 1e6,
+            note=f"{m['frame_bytes']:.0f} B frames in 4 KiB reads"),
+        Row('encode_frame(MotorCommand)', m['encode'] * 1e6, 'us', 'struct.pack of the payload',
+            m['pack'] * 1e6),
+        Row('SafetySupervisor cycle (on_state + output)', m['cycle'] * 1e6, 'us',
+            'the 100 Hz cycle period', CYCLE_S * 1e6),
+        Row('link load, host -> MCU', m['tx'], 'B/s', f'{BAUD} baud, 8N1', m['line'],
+            note='100 Hz motor + valve commands'),
+        Row('link load, MCU -> host', m['rx'], 'B/s', f'{BAUD} baud, 8N1', m['line'],
+            note='50 Hz STATE'),
+    ]
+
+
+def run(quick: bool) -> list[Row]:
+    """Rows of the summary table (--quick: 2,000 frames, 3 rounds)."""
+    return rows(measure(2000, 3) if quick else measure(20000, 7))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--frames', type=int, default=20000)
+    args = parser.parse_args(argv)
+    m = measure(args.frames, 7)
+    print(f"decode: {m['decode'] * 1e6:.2f} us/frame ({m['frame_bytes']:.0f} B), library "
+          f"floor {m['floor'] * 1e6:.2f} us/frame: x{m['decode'] / m['floor']:.1f}")
+    print(f"encode: {m['encode'] * 1e6:.2f} us/frame, struct.pack of the payload "
+          f"{m['pack'] * 1e6:.2f} us: x{m['encode'] / m['pack']:.1f}")
+    print(f"bridge cycle (on_state + output): {m['cycle'] * 1e6:.0f} us, the 100 Hz period "
+          f"{CYCLE_S * 1e6:.0f} us: {m['cycle'] / CYCLE_S * 100:.2f} % of it")
+    print(f"link load: host -> MCU {m['tx']} B/s, MCU -> host {m['rx']} B/s; {BAUD} baud "
+          f"carries {m['line']:.0f} B/s: {m['tx'] / m['line'] * 100:.1f} % and "
+          f"{m['rx'] / m['line'] * 100:.1f} %")
+    print()
+    print_rows('mcu_link', rows(m))
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -8,11 +8,15 @@ Target (issue 5): a controller step costs <= 5 us per axis, ILC included. Measur
 - a baseline: the bare numpy velocity-form PID update of eqs. (1) and (3) on the same arrays
   (no validation, quadrant mapping, feedforward or recording), and the simulated plant's step.
 
-Usage: ``PYTHONPATH=inflarm_model:inflarm_control:inflarm_hw python benchmarks/bench_pid_ilc.py``
+Candidates are timed round-robin (``common.interleaved``), medians reported.
+
+Usage: ``source scripts/env.sh && python benchmarks/bench_pid_ilc.py``
 """
 
-import time
+import sys
+import timeit
 
+from common import Row, Target, interleaved, print_rows
 import numpy as np
 
 from inflarm_control.pid_ilc import PidIlcController
@@ -21,17 +25,7 @@ from inflarm_hw.sra_plant import SoftArmPlant
 START = (0.0, 0.0, 0.604)
 TARGET = (0.100, 0.110, 0.670)
 TARGET_US_PER_AXIS = 5.0
-
-
-def _best_of(fn, repeats: int, number: int) -> float:
-    """Smallest mean time of one call [s] over ``repeats`` batches of ``number`` calls."""
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / number)
-    return best
+TRIAL_STEPS = 150  # a 30 s trial at 0.2 s
 
 
 def _baseline_pid(n: int):
@@ -59,62 +53,83 @@ def _controller_step(n: int):
     calls = [0]
 
     def step():
-        if calls[0] == 150:  # a 30 s trial; restart so the memory is in use throughout
+        if calls[0] == TRIAL_STEPS:  # restart so the memory is in use throughout
             controller.finish_trial()
             controller.start_trial(START, TARGET, memory=memory)
             calls[0] = 0
         calls[0] += 1
         return controller.step(y, 0.2)
 
-    return step, controller, memory
+    return step, controller
 
 
-def _finish_trial(n: int) -> float:
+def _finish_trial(n: int) -> timeit.Timer:
+    """A timer of one finish_trial call, its trial run (untimed) before every batch."""
     controller = PidIlcController(n)
     memory = np.full((n, controller.params.memory_steps, 5), 10e3)
     y = np.tile(START, (n, 1))
-    best = np.inf
-    for _ in range(3 if n > 1 else 30):
+
+    def trial():
         controller.start_trial(START, TARGET, memory=memory)
-        for _ in range(150):
+        for _ in range(TRIAL_STEPS):
             controller.step(y, 0.2)
-        t0 = time.perf_counter()
-        controller.finish_trial()
-        best = min(best, time.perf_counter() - t0)
-    return best
+
+    return timeit.Timer(controller.finish_trial, setup=trial)
 
 
-def main() -> None:
-    rows = []
-    for n, repeats, number in ((1, 7, 3000), (10_000, 5, 20)):
-        baseline = _best_of(_baseline_pid(n), repeats, number)
-        step, controller, _ = _controller_step(n)
-        core = _best_of(step, repeats, number)
-        learn = _finish_trial(n) / controller.params.memory_steps
+def measure(sizes: tuple[int, ...], rounds: int, min_time_s: float) -> dict[int, dict]:
+    """Per n: the baseline PID, controller step, learning per step and plant step [s]."""
+    out = {}
+    for n in sizes:
+        step, controller = _controller_step(n)
         plant = SoftArmPlant(n)
         command = np.zeros((n, 5))
-        plant_step = _best_of(lambda p=plant, c=command: p.step(c, 0.2), repeats,
-                              max(1, number // 4))
-        rows.append((n, baseline, core, learn, plant_step))
+        steps = interleaved({'baseline': _baseline_pid(n), 'step': step,
+                             'plant': lambda p=plant, c=command: p.step(c, 0.2)},
+                            rounds, min_time_s=min_time_s)
+        learning = interleaved({'finish': _finish_trial(n)}, rounds if n > 1 else 3 * rounds,
+                               number=1)
+        out[n] = {name: t.median_s for name, t in steps.items()}
+        out[n]['learn'] = learning['finish'].median_s / controller.params.memory_steps
+    return out
 
-    print('PID + ILC controller core (inflarm_control.pid_ilc), best-of timings')
+
+def rows(m: dict[int, dict]) -> list[Row]:
+    """Per n: step + ILC per axis (target) and the step against the bare PID."""
+    out = []
+    for n, f in m.items():
+        total = f['step'] + f['learn']
+        out.append(Row(f'step + ILC per axis, n = {n}', total / (3 * n) * 1e6, 'us',
+                       'bare numpy PID per axis', f['baseline'] / (3 * n) * 1e6,
+                       Target(at_most=TARGET_US_PER_AXIS),
+                       f"finish_trial amortized over memory_steps; the plant's step "
+                       f"{f['plant'] * 1e6:.0f} us"))
+    return out
+
+
+def run(quick: bool) -> list[Row]:
+    """Rows of the summary table (--quick: n = 1 and 1,000, 3 rounds)."""
+    return rows(measure((1, 1000), 3, 0.01) if quick else measure((1, 10_000), 7, 0.05))
+
+
+def main() -> int:
+    m = measure((1, 10_000), 7, 0.05)
+    print('PID + ILC controller core (inflarm_control.pid_ilc), medians of round-robin timings')
     print(f'{"n":>7} {"baseline PID":>14} {"step":>12} {"step+ILC":>12} '
           f'{"per axis":>10} {"vs baseline":>12} {"plant step":>12}')
-    for n, baseline, core, learn, plant_step in rows:
-        total = core + learn
-        per_axis = total / (3 * n)
-        print(f'{n:>7} {baseline * 1e6:>11.2f} us {core * 1e6:>9.2f} us {total * 1e6:>9.2f} us '
-              f'{per_axis * 1e6:>7.3f} us {total / baseline:>11.2f}x {plant_step * 1e6:>9.1f} us')
+    for n, f in m.items():
+        total = f['step'] + f['learn']
+        print(f"{n:>7} {f['baseline'] * 1e6:>11.2f} us {f['step'] * 1e6:>9.2f} us "
+              f"{total * 1e6:>9.2f} us {total / (3 * n) * 1e6:>7.3f} us "
+              f"{total / f['baseline']:>11.2f}x {f['plant'] * 1e6:>9.1f} us")
     print()
     print('step: PidIlcController.step (validation, quadrant mapping, feedforward, PID, '
           'anti-windup, recording)')
     print('step+ILC: plus finish_trial (the learning update) amortized over memory_steps')
-    for n, _, core, learn, _ in rows:
-        per_axis = (core + learn) / (3 * n) * 1e6
-        verdict = 'meets' if per_axis <= TARGET_US_PER_AXIS else 'misses'
-        print(f'n = {n}: {per_axis:.3f} us per axis {verdict} the {TARGET_US_PER_AXIS:.0f} us '
-              f'target ({per_axis / TARGET_US_PER_AXIS:.2f} of it)')
+    print()
+    print_rows('pid_ilc', rows(m))
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -14,15 +14,16 @@ with the alert margin), 26-connected, no corner cutting, steps costing their len
 - tcod's C A* (``tcod.path.CustomGraph`` + ``Pathfinder``, integer step costs 100 / 141 / 173,
   the tightest admissible heuristic tcod offers, its graph build reported separately).
 
-inflarm and tcod are timed by the median of calls made in turn (the machine is shared: a busy
-spell then slows both alike), the slow peers by their best of 1-3 calls; all after a warm-up
-(numba's compilation is cached on disk and measured apart in a fresh process). Peak memory of a
-1 mm build + plan is the peak RSS of a fresh process (``VmHWM`` of ``/proc/self/status``):
-numba's arrays are invisible to tracemalloc.
+inflarm and tcod are timed by the median of calls made in turn (``common.interleaved``: the
+machine is shared, a busy spell then slows both alike), after a warm-up (numba's compilation is
+cached on disk and measured apart in a fresh process); the slow peers by their best of 1-3
+calls. Peak memory of a 1 mm build + plan is the peak RSS of a fresh process (``VmHWM`` of
+``/proc/self/status``): numba's arrays are invisible to tracemalloc.
 
 Usage: ``source scripts/env.sh && python benchmarks/bench_planning.py [--margin 0.03]
 [--resolutions 10 5 2 1] [--networkx-max-gb 3]``; peers come from
-``benchmarks/requirements.txt`` (a missing one is skipped with a message).
+``benchmarks/requirements.txt`` (a missing one is skipped with a message). ``--quick`` (of
+``run_all.py``): 10 mm only, no networkx, no fresh processes.
 """
 
 import argparse
@@ -35,6 +36,7 @@ import sys
 import tempfile
 import time
 
+from common import Row, Target, interleaved, print_rows, skip_reason_if_missing
 import numpy as np
 
 from inflarm_planning.astar import plan
@@ -47,29 +49,6 @@ NETWORKX_BYTES_PER_EDGE = 357  # measured with tracemalloc on the 10 mm graph
 TARGET_1MM_S = 5.0
 TARGET_1MM_GB = 2.0
 TARGET_LENGTH_RATIO = 1.02
-
-
-def best_of(fn, repeats: int) -> tuple[float, object]:
-    """Smallest wall time of ``repeats`` calls [s], and the last result."""
-    best, result = math.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        result = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, result
-
-
-def interleaved(functions: dict, rounds: int) -> tuple[dict, dict]:
-    """Median and smallest wall time [s] of each function, calling them in turn ``rounds``
-    times (so that a busy spell of the shared machine slows them all alike), and the results."""
-    times = {name: [] for name in functions}
-    results = {}
-    for _ in range(rounds):
-        for name, fn in functions.items():
-            t0 = time.perf_counter()
-            results[name] = fn()
-            times[name].append(time.perf_counter() - t0)
-    return {name: (float(np.median(t)), min(t)) for name, t in times.items()}, results
 
 
 def path_length(points: np.ndarray) -> float:
@@ -202,16 +181,6 @@ def tcod_astar(graph, start, goal) -> np.ndarray:
     return path[:, np.argsort(AXES)]
 
 
-def have(module: str) -> bool:
-    try:
-        __import__(module)
-        return True
-    except ImportError:
-        print(f'  ({module} is not installed: pip install -r benchmarks/requirements.txt; '
-              f'skipped)')
-        return False
-
-
 # --- fresh-process figures ---------------------------------------------------------------------
 
 CHILD_1MM = """
@@ -249,7 +218,147 @@ def fresh_process(code: str, env: dict | None = None) -> list[float]:
     return [float(v) for v in out.stdout.split()]
 
 
-def main() -> int:
+def bench_resolution(res_mm: float, margin: float, peers: dict, networkx_max_gb: float,
+                     rounds: int, quick: bool) -> dict:
+    """Figures at one resolution: build, inflarm (both costs), tcod, trajectory, heapq, networkx
+    (times [s], lengths [m]); a peer's entry is absent where it was not run (networkx is not
+    run with ``quick``)."""
+    r = res_mm * 1e-3
+    clear_cache()
+    build = interleaved({'build': lambda: build_free_space([OBSTACLE], r, margin)},
+                        1 if res_mm < 2 else 3, number=1)['build']
+    space = free_space([OBSTACLE], r, margin)  # into the cache: plan() reuses it
+    result = plan(START, GOAL, [OBSTACLE], r, margin)  # the path, and a warm-up
+    paper = plan(START, GOAL, [OBSTACLE], r, margin, cost='paper')
+    start, goal = result.cells[0], result.cells[-1]
+    free = space.free.copy()
+    lattice = space.lattice
+    contenders = {
+        'ours': lambda: plan(START, GOAL, [OBSTACLE], r, margin),
+        'paper': lambda: plan(START, GOAL, [OBSTACLE], r, margin, cost='paper'),
+    }
+    row = {'mm': res_mm, 'shape': lattice.shape, 'cells': lattice.size, 'build': build.median_s,
+           'rounds': rounds, 'ours_len': path_length(lattice.points(result.cells)),
+           'expanded': result.expanded, 'searches': result.searches,
+           'paper_len': path_length(lattice.points(paper.cells))}
+    if peers['tcod'] is None:
+        t0 = time.perf_counter()
+        graph = tcod_graph(free)
+        row['tcod_build'] = time.perf_counter() - t0
+        row['tcod_len'] = path_length(lattice.points(tcod_astar(graph, start, goal)))
+        contenders['tcod'] = lambda: tcod_astar(graph, start, goal)
+    timing = interleaved(contenders, rounds, number=1)
+    contenders.clear()  # frees tcod's graph
+    for name, t in timing.items():
+        row[name], row[f'{name}_best'] = t.median_s, t.best_s
+
+    trajectory = make_trajectory(result.path, [OBSTACLE], margin)
+    row['trajectory'] = interleaved(
+        {'t': lambda: make_trajectory(result.path, [OBSTACLE], margin)}, 3, number=1)['t'].best_s
+    row['trajectory_len'], row['waypoints'] = trajectory.length, len(trajectory.points)
+
+    slow = {}  # the slow peers' results, from their timed calls
+
+    def heap():
+        slow['heapq'] = heapq_astar(free, start, goal)
+
+    row['heapq'] = interleaved({'heapq': heap}, 3 if res_mm >= 5 else 1, number=1)['heapq'].best_s
+    row['heapq_len'] = path_length(lattice.points(slow['heapq']))
+
+    if peers['networkx'] is None and quick:
+        row['networkx_skipped'] = 'not in --quick (its graph build takes seconds)'
+    elif peers['networkx'] is None:
+        edges = int(sum(ok.sum() for ok in guard_ok(free)) // 2)
+        need_gb = edges * NETWORKX_BYTES_PER_EDGE / 1e9
+        if need_gb > networkx_max_gb:
+            row['networkx_skipped'] = (f'its graph of {edges / 1e6:.0f} M edges would need '
+                                       f'~{need_gb:.0f} GB (over --networkx-max-gb)')
+        else:
+            t0 = time.perf_counter()
+            nx_graph = networkx_graph(free)
+            row['networkx_build'] = time.perf_counter() - t0
+
+            def nx_plan():
+                slow['networkx'] = networkx_astar(nx_graph, free.shape, start, goal)
+
+            row['networkx'] = interleaved({'nx': nx_plan}, 3, number=1)['nx'].best_s
+            row['networkx_len'] = path_length(lattice.points(slow['networkx']))
+            del nx_graph
+    return row
+
+
+def measure(margin: float, resolutions: list[float], networkx_max_gb: float, quick: bool
+            ) -> dict:
+    """Every figure of the benchmark (--quick: no fresh processes, fewer rounds)."""
+    compile_s = None
+    if not quick:
+        with tempfile.TemporaryDirectory() as cache:
+            imports, first = fresh_process(CHILD_COMPILE, {'NUMBA_CACHE_DIR': cache})
+            _, cached = fresh_process(CHILD_COMPILE, {'NUMBA_CACHE_DIR': cache})
+        compile_s = {'imports': imports, 'first': first, 'cached': cached}
+    peers = {name: skip_reason_if_missing(name) for name in ('networkx', 'tcod')}
+    rounds = {10: 10} if quick else {10: 100, 5: 30, 2: 6}
+    resolution_rows = [bench_resolution(mm, margin, peers, networkx_max_gb,
+                                        rounds.get(int(mm), 2), quick) for mm in resolutions]
+    fresh = None
+    if not quick:
+        base, built, peak, elapsed, build_s, expanded = fresh_process(
+            CHILD_1MM.format(margin=margin))
+        fresh = {'base_gib': base / 2**20, 'built_gib': built / 2**20, 'peak_gib': peak / 2**20,
+                 'plan_s': elapsed, 'build_s': build_s, 'expanded': int(expanded)}
+    return {'margin': margin, 'compile': compile_s, 'peers': peers,
+            'resolutions': resolution_rows, 'fresh_1mm': fresh}
+
+
+def rows(m: dict) -> list[Row]:
+    """Per resolution: inflarm against tcod (time and length targets), heapq and networkx;
+    the 1 mm plan in a fresh process; the kernel from numba's disk cache."""
+    out = []
+    peers = m['peers']
+    for r in m['resolutions']:
+        mm = f"{r['mm']:g} mm"
+        grid = f"grid {'x'.join(map(str, r['shape']))}, {r['expanded']} cells expanded"
+        if peers['tcod'] is None:
+            out += [Row(f'A* at {mm}', r['ours'] * 1e3, 'ms', "tcod's C A*", r['tcod'] * 1e3,
+                        Target(ratio_at_most=1.0),
+                        f"{grid}; median of {r['rounds']} interleaved calls; free-space build "
+                        f"{r['build'] * 1e3:.0f} ms apart"),
+                    Row(f'path length at {mm}', r['ours_len'] * 1e3, 'mm', "tcod's path",
+                        r['tcod_len'] * 1e3, Target(ratio_at_most=TARGET_LENGTH_RATIO))]
+        else:
+            out.append(Row.skipped(f'A* at {mm} against tcod', peers['tcod']))
+        out.append(Row(f'A* at {mm}', r['ours'] * 1e3, 'ms', 'plain heapq A*', r['heapq'] * 1e3,
+                       note='' if peers['tcod'] is None else grid))
+        if peers['networkx'] is not None:
+            out.append(Row.skipped(f'A* at {mm} against networkx', peers['networkx']))
+        elif 'networkx_skipped' in r:
+            out.append(Row.skipped(f'A* at {mm} against networkx', r['networkx_skipped']))
+        else:
+            out.append(Row(f'A* at {mm}', r['ours'] * 1e3, 'ms', 'networkx.astar_path',
+                           r['networkx'] * 1e3,
+                           note=f"its graph build {r['networkx_build']:.1f} s apart"))
+    fresh = m['fresh_1mm']
+    if fresh is not None:
+        out += [Row('plan at 1 mm, fresh process', fresh['plan_s'], 's',
+                    target=Target(at_most=TARGET_1MM_S),
+                    note=f"free-space build {fresh['build_s']:.2f} s apart"),
+                Row('peak RSS, 1 mm build + plan', fresh['peak_gib'], 'GiB',
+                    'after the imports', fresh['base_gib'], Target(at_most=TARGET_1MM_GB))]
+    c = m['compile']
+    if c is not None:
+        out.append(Row('A* kernel, first call from the disk cache', c['cached'], 's',
+                       'first call, compiling', c['first'], note='numba, fresh processes'))
+    return out
+
+
+def run(quick: bool) -> list[Row]:
+    """Rows of the summary table (--quick: 10 mm only, 10 rounds, no networkx, no fresh
+    processes; full: 10, 5, 2 and 1 mm, about 2 min)."""
+    resolutions = [10.0] if quick else [10.0, 5.0, 2.0, 1.0]
+    return rows(measure(ALERT_MARGIN, resolutions, 3.0, quick))
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--margin', type=float, default=ALERT_MARGIN,
                         help=f'alert margin [m] (default {ALERT_MARGIN}, the node default)')
@@ -257,116 +366,50 @@ def main() -> int:
                         help='grid resolutions [mm]')
     parser.add_argument('--networkx-max-gb', type=float, default=3.0,
                         help='skip networkx where its graph would need more [GB]')
-    args = parser.parse_args()
-    margin = args.margin
+    args = parser.parse_args(argv)
+    m = measure(args.margin, args.resolutions, args.networkx_max_gb, quick=False)
     print(f"paper's scenario: start {START} m, goal {GOAL} m, obstacle "
-          f'{OBSTACLE.min_corner}-{OBSTACLE.max_corner} m, alert margin {margin} m\n')
-
-    with tempfile.TemporaryDirectory() as cache:
-        imports, first = fresh_process(CHILD_COMPILE, {'NUMBA_CACHE_DIR': cache})
-        _, cached = fresh_process(CHILD_COMPILE, {'NUMBA_CACHE_DIR': cache})
-    print(f'numba kernel: first call {first:.2f} s compiling, {cached * 1e3:.0f} ms from the '
-          f'disk cache (imports {imports:.2f} s)\n')
-
-    peers = {name: have(module) for name, module in
-             (('networkx', 'networkx'), ('tcod', 'tcod'))}
-    rows = []
-    for res_mm in args.resolutions:
-        r = res_mm * 1e-3
-        clear_cache()
-        build_s, space = best_of(lambda r=r: build_free_space([OBSTACLE], r, margin),
-                                 1 if res_mm < 2 else 3)
-        free_space([OBSTACLE], r, margin)  # into the cache: plan() reuses it
-        rounds = {10: 100, 5: 30, 2: 6}.get(int(res_mm), 2)
-        result = plan(START, GOAL, [OBSTACLE], r, margin)
-        start, goal = result.cells[0], result.cells[-1]
-        free = space.free.copy()
-        lattice = space.lattice
-        contenders = {
-            'ours': lambda r=r: plan(START, GOAL, [OBSTACLE], r, margin),
-            'paper': lambda r=r: plan(START, GOAL, [OBSTACLE], r, margin, cost='paper'),
-        }
-        if peers['tcod']:
-            t0 = time.perf_counter()
-            graph = tcod_graph(free)
-            tcod_build = time.perf_counter() - t0
-            contenders['tcod'] = lambda gr=graph, s=start, g=goal: tcod_astar(gr, s, g)
-        timing, results = interleaved(contenders, rounds)
-        result, paper = results['ours'], results['paper']
-        ours_s, ours_paper_s = timing['ours'][0], timing['paper'][0]
-        row = {'mm': res_mm, 'cells': lattice.size, 'build': build_s, 'ours': ours_s,
-               'ours_len': path_length(lattice.points(result.cells)),
-               'expanded': result.expanded, 'paper': ours_paper_s,
-               'paper_len': path_length(lattice.points(paper.cells))}
-        print(f'{res_mm:g} mm: grid {lattice.shape} ({lattice.size / 1e6:.2f} M points), '
-              f'free-space build {build_s * 1e3:.1f} ms; median of {rounds} interleaved '
-              f'calls (smallest in brackets)')
-        print(f'  inflarm A*        {ours_s * 1e3:9.2f} ms ({timing["ours"][1] * 1e3:.2f})'
-              f'  length {row["ours_len"] * 1e3:.2f} mm  ({result.expanded} cells expanded, '
-              f'{result.searches} crop(s))')
-        print(f'  inflarm eq. 7     {ours_paper_s * 1e3:9.2f} ms ({timing["paper"][1] * 1e3:.2f})'
-              f'  length {row["paper_len"] * 1e3:.2f} mm')
-        if peers['tcod']:
-            row['tcod'] = timing['tcod'][0]
-            row['tcod_len'] = path_length(lattice.points(results['tcod']))
-            del graph, contenders
-            tcod_min = timing['tcod'][1] * 1e3
-            print(f'  tcod A*           {row["tcod"] * 1e3:9.2f} ms ({tcod_min:.2f})  length '
-                  f'{row["tcod_len"] * 1e3:.2f} mm   inflarm is {row["tcod"] / ours_s:.1f}x '
-                  f'faster, length ratio {row["ours_len"] / row["tcod_len"]:.4f} (graph build '
-                  f'{tcod_build * 1e3:.0f} ms)')
-
-        traj_s, trajectory = best_of(
-            lambda p=result.path: make_trajectory(p, [OBSTACLE], margin), 3)
-        print(f'  trajectory        {traj_s * 1e3:9.2f} ms  length '
-              f'{trajectory.length * 1e3:.2f} mm (shortcut, smoothed, '
-              f'{len(trajectory.points)} waypoints)')
-        heap_s, heap_cells = best_of(lambda f=free, s=start, g=goal: heapq_astar(f, s, g),
-                                     3 if res_mm >= 5 else 1)
-        row['heapq'], row['heapq_len'] = heap_s, path_length(lattice.points(heap_cells))
-        print(f'  heapq A*          {heap_s * 1e3:9.2f} ms  length '
-              f'{row["heapq_len"] * 1e3:.2f} mm   inflarm is {heap_s / ours_s:.1f}x faster')
-
-        if peers['networkx']:
-            edges = int(sum(ok.sum() for ok in guard_ok(free)) // 2)
-            need_gb = edges * NETWORKX_BYTES_PER_EDGE / 1e9
-            if need_gb > args.networkx_max_gb:
-                print(f'  networkx          skipped: its graph of {edges / 1e6:.0f} M edges '
-                      f'would need ~{need_gb:.0f} GB')
-            else:
-                t0 = time.perf_counter()
-                graph = networkx_graph(free)
-                nx_build = time.perf_counter() - t0
-                nx_s, nx_cells = best_of(
-                    lambda gr=graph, sh=free.shape, s=start, g=goal: networkx_astar(gr, sh, s, g),
-                    3)
-                row['networkx'] = nx_s
-                del graph
-                print(f'  networkx          {nx_s * 1e3:9.2f} ms  length '
-                      f'{path_length(lattice.points(nx_cells)) * 1e3:.2f} mm   inflarm is '
-                      f'{nx_s / ours_s:.1f}x faster (graph build {nx_build:.1f} s)')
-
-        rows.append(row)
+          f'{OBSTACLE.min_corner}-{OBSTACLE.max_corner} m, alert margin {args.margin} m\n')
+    c = m['compile']
+    print(f"numba kernel: first call {c['first']:.2f} s compiling, {c['cached'] * 1e3:.0f} ms "
+          f"from the disk cache (imports {c['imports']:.2f} s)\n")
+    for name, reason in m['peers'].items():
+        if reason is not None:
+            print(f'  ({name} skipped: {reason})')
+    for r in m['resolutions']:
+        print(f"{r['mm']:g} mm: grid {r['shape']} ({r['cells'] / 1e6:.2f} M points), "
+              f"free-space build {r['build'] * 1e3:.1f} ms; median of {r['rounds']} "
+              f'interleaved calls (smallest in brackets)')
+        print(f"  inflarm A*        {r['ours'] * 1e3:9.2f} ms ({r['ours_best'] * 1e3:.2f})  "
+              f"length {r['ours_len'] * 1e3:.2f} mm  ({r['expanded']} cells expanded, "
+              f"{r['searches']} crop(s))")
+        print(f"  inflarm eq. 7     {r['paper'] * 1e3:9.2f} ms ({r['paper_best'] * 1e3:.2f})  "
+              f"length {r['paper_len'] * 1e3:.2f} mm")
+        if 'tcod' in r:
+            print(f"  tcod A*           {r['tcod'] * 1e3:9.2f} ms ({r['tcod_best'] * 1e3:.2f})  "
+                  f"length {r['tcod_len'] * 1e3:.2f} mm   inflarm is "
+                  f"{r['tcod'] / r['ours']:.1f}x faster, length ratio "
+                  f"{r['ours_len'] / r['tcod_len']:.4f} (graph build "
+                  f"{r['tcod_build'] * 1e3:.0f} ms)")
+        print(f"  trajectory        {r['trajectory'] * 1e3:9.2f} ms  length "
+              f"{r['trajectory_len'] * 1e3:.2f} mm (shortcut, smoothed, {r['waypoints']} "
+              f'waypoints)')
+        print(f"  heapq A*          {r['heapq'] * 1e3:9.2f} ms  length "
+              f"{r['heapq_len'] * 1e3:.2f} mm   inflarm is {r['heapq'] / r['ours']:.1f}x faster")
+        if 'networkx_skipped' in r:
+            print(f"  networkx          skipped: {r['networkx_skipped']}")
+        elif 'networkx' in r:
+            print(f"  networkx          {r['networkx'] * 1e3:9.2f} ms  length "
+                  f"{r['networkx_len'] * 1e3:.2f} mm   inflarm is "
+                  f"{r['networkx'] / r['ours']:.1f}x faster (graph build "
+                  f"{r['networkx_build']:.1f} s)")
         print()
-
-    base, built, peak, elapsed, build_s, expanded = fresh_process(
-        CHILD_1MM.format(margin=margin))
-    print(f'1 mm in a fresh process: build {build_s:.2f} s, plan {elapsed:.2f} s '
-          f'({int(expanded)} cells expanded); peak RSS {base / 2**20:.2f} GiB after imports, '
-          f'{built / 2**20:.2f} GiB after the build, {peak / 2**20:.2f} GiB after the plan')
-
-    print('\ntargets:')
-    for row in rows:
-        if 'tcod' in row:
-            faster = row['ours'] < row['tcod']
-            short = row['ours_len'] <= TARGET_LENGTH_RATIO * row['tcod_len']
-            print(f"  {row['mm']:g} mm: {'faster' if faster else 'SLOWER'} than tcod "
-                  f"({row['tcod'] / row['ours']:.1f}x), length "
-                  f"{'within' if short else 'OVER'} tcod + 2 % "
-                  f"({row['ours_len'] / row['tcod_len']:.4f})")
-    print(f"  1 mm plan: {elapsed:.2f} s ({'<=' if elapsed <= TARGET_1MM_S else 'OVER'} "
-          f"{TARGET_1MM_S:g} s), peak {peak / 2**20:.2f} GiB "
-          f"({'<=' if peak / 2**20 <= TARGET_1MM_GB else 'OVER'} {TARGET_1MM_GB:g} GiB)")
+    f = m['fresh_1mm']
+    print(f"1 mm in a fresh process: build {f['build_s']:.2f} s, plan {f['plan_s']:.2f} s "
+          f"({f['expanded']} cells expanded); peak RSS {f['base_gib']:.2f} GiB after imports, "
+          f"{f['built_gib']:.2f} GiB after the build, {f['peak_gib']:.2f} GiB after the plan")
+    print()
+    print_rows('planning', rows(m))
     return 0
 
 

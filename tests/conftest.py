@@ -28,7 +28,7 @@ DOMAIN_LOCKS = pathlib.Path(tempfile.gettempdir()) / 'inflarm-ros-domains'
 _next_domain = os.getpid() % 100
 
 
-def _lock_free_domain():
+def lock_free_domain():
     """(domain id, open lock file) for the first domain no other process holds."""
     global _next_domain
     DOMAIN_LOCKS.mkdir(exist_ok=True)
@@ -48,7 +48,7 @@ def _lock_free_domain():
 @pytest.fixture
 def domain_id():
     """A ROS domain id that no other test, in this run or any other, uses meanwhile."""
-    domain, lock = _lock_free_domain()
+    domain, lock = lock_free_domain()
     yield domain
     lock.close()  # releases the lock
 

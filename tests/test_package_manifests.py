@@ -1,4 +1,5 @@
-"""Every package.xml is honest: it declares what the package imports, and nothing else.
+"""Every package.xml is honest: it declares what the package imports (and the packages whose
+executables it starts), and nothing else.
 
 Each manifest is parsed with catkin_pkg (what colcon and rosdep read); the package's Python
 sources are scanned for imports; the two sets must agree, through the rosdep key of each
@@ -36,7 +37,7 @@ PYPI_ONLY = {'cobs'}
 ROS_PACKAGES = {
     'rclpy', 'ament_index_python', 'builtin_interfaces', 'std_msgs', 'std_srvs',
     'sensor_msgs', 'geometry_msgs', 'nav_msgs', 'visualization_msgs', 'diagnostic_msgs',
-    'rcl_interfaces', 'lifecycle_msgs', 'rosgraph_msgs', *PACKAGES,
+    'rcl_interfaces', 'lifecycle_msgs', 'rosgraph_msgs', 'launch', 'launch_ros', *PACKAGES,
 }
 # Keys with no module to import (not checked for use).
 NOT_IMPORTED = {'python3-pytest'}
@@ -54,8 +55,19 @@ def imported_modules(package: str) -> set[str]:
     return {m for m in modules if m not in sys.stdlib_module_names}
 
 
+def started_packages(package: str) -> set[str]:
+    """Packages whose executables ``package`` starts: the bringup's systems and RViz."""
+    if package != 'inflarm_bringup':
+        return set()
+    from inflarm_bringup.systems import SYSTEMS, Backend, visualization_nodes
+
+    nodes = [n for make in SYSTEMS.values() for kind in ('sim', 'sim_mcu')
+             for n in make(Backend(kind, '/tmp/mcu'))]
+    return {n.package for n in (*nodes, *visualization_nodes())} - {package}
+
+
 def required_keys(package: str) -> set[str]:
-    keys = set()
+    keys = started_packages(package)
     for module in imported_modules(package) - {package}:
         if module in ROS_PACKAGES:
             keys.add(module)

@@ -539,11 +539,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def build_knowledge(path: pathlib.Path) -> pathlib.Path:
     """The experiential knowledge database of the scenario's region (section 3.2 of 001)."""
+    from inflarm_bringup.knowledge_cli import knowledge_plant
     from inflarm_control.knowledge import KnowledgeGrid, build_knowledge_database
-    from inflarm_hw.sra_plant import SoftArmPlant
 
     grid = KnowledgeGrid(origin=KNOWLEDGE_ORIGIN, spacing=0.01, shape=KNOWLEDGE_SHAPE)
-    build_knowledge_database(path, grid, plant_factory=SoftArmPlant, progress=False).close()
+    build_knowledge_database(path, grid, plant_factory=knowledge_plant, progress=False).close()
     return path.resolve()
 
 

@@ -5,13 +5,22 @@ knowledge point of the 1 cm grid
 (67,200 points; about 1.5 min on two cores) and writes the memory-mapped database to OUT, which
 the pressure controller's ``knowledge_db_path`` parameter then reads. An interrupted build
 resumes where it stopped.
+
+The plant is `knowledge_plant`: the default simulated arm, valve delay included (the memory is
+learned on the arm's dynamics as they are), measured exactly: measurement noise would only make
+a rebuild differ from the file it rebuilds.
 """
 
 import argparse
 import sys
 
 from inflarm_control.knowledge import build_knowledge_database
-from inflarm_hw.sra_plant import SoftArmPlant
+from inflarm_hw.sra_plant import NOISE_FREE, SoftArmPlant
+
+
+def knowledge_plant(n: int) -> SoftArmPlant:
+    """``n`` simulated arms to learn the database on: the default plant, measured exactly."""
+    return SoftArmPlant(n, NOISE_FREE)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -24,8 +33,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--overwrite', action='store_true', help='start over if OUT exists')
     args = parser.parse_args(argv)
     try:
-        db = build_knowledge_database(args.out, plant_factory=SoftArmPlant, n_trials=args.trials,
-                                      workers=args.workers, overwrite=args.overwrite)
+        db = build_knowledge_database(args.out, plant_factory=knowledge_plant,
+                                      n_trials=args.trials, workers=args.workers,
+                                      overwrite=args.overwrite)
     except (OSError, ValueError) as err:
         print(f'inflarm-build-knowledge: {err}', file=sys.stderr)
         return 1

@@ -2,7 +2,7 @@
 
     inflarm-launch [SYSTEM] [--backend sim|sim_mcu|hardware] [--port DEVICE]
                    [--on-exit stop|restart|ignore] [--in-process] [--duration S]
-                   [--log-level LEVEL]
+                   [--log-level LEVEL] [--rviz]
 
 Each node of the system (``inflarm_bringup.systems``) runs as its own process with its
 parameter files, its output prefixed by its name. Ctrl-C or SIGTERM (or the end of
@@ -14,6 +14,9 @@ exited cleanly and none died.
 
 ``--in-process`` runs every node in this one process instead, on a multi-threaded executor
 (the nodes' parameter files apply as in separate processes).
+
+``--rviz`` adds ``robot_state_publisher``, the static frames and RViz
+(`inflarm_bringup.systems.visualization_nodes`), from a ROS 2 Jazzy install.
 """
 
 import argparse
@@ -24,12 +27,18 @@ import inspect
 import os
 import signal
 import sys
-import tempfile
 import threading
 import time
 
-from inflarm_bringup.processes import NodeProcess, ProcessGroup, ros_environment
-from inflarm_bringup.systems import BACKENDS, SYSTEMS, Backend, system_nodes
+from inflarm_bringup.processes import NodeProcess, ProcessGroup, is_installed, ros_environment
+from inflarm_bringup.systems import (
+    BACKENDS,
+    SYSTEMS,
+    VISUALIZATION_PACKAGES,
+    backend,
+    system_nodes,
+    visualization_nodes,
+)
 
 ON_EXIT = ('stop', 'restart', 'ignore')
 
@@ -132,14 +141,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--duration', type=float, default=None,
                         help='stop the system after this many seconds (default: until Ctrl-C)')
     parser.add_argument('--log-level', default=None, help='log level for every node')
+    parser.add_argument('--rviz', action='store_true',
+                        help='also robot_state_publisher, the static frames and RViz '
+                             '(from a ROS 2 Jazzy install)')
     args = parser.parse_args(argv)
-    port = args.port
-    if args.backend == 'sim_mcu' and not port:
-        port = os.path.join(tempfile.mkdtemp(prefix='inflarm-mcu-'), 'mcu')
     try:
-        nodes = system_nodes(args.system, Backend(args.backend, port), args.log_level)
+        nodes = system_nodes(args.system, backend(args.backend, args.port), args.log_level)
     except ValueError as error:
         parser.error(str(error))
+    if args.rviz:
+        if args.in_process:
+            parser.error('--rviz starts RViz and robot_state_publisher as processes: '
+                         'not with --in-process')
+        missing = [p for p in VISUALIZATION_PACKAGES if not is_installed(p)]
+        if missing:
+            parser.error(f'--rviz needs {", ".join(missing)} from a ROS 2 Jazzy install '
+                         f'(source /opt/ros/jazzy/setup.bash), not found')
+        nodes += visualization_nodes()
     os.environ.update(ros_environment())
     if args.in_process:
         launch_in_process(nodes, args.duration)

@@ -26,7 +26,11 @@ import tempfile
 import threading
 import time
 
-from ament_index_python.packages import get_package_prefix, get_package_share_directory
+from ament_index_python.packages import (
+    PackageNotFoundError,
+    get_package_prefix,
+    get_package_share_directory,
+)
 import yaml
 
 # Node processes start with these blocked: a stop request sent before a node has installed its
@@ -52,6 +56,8 @@ class NodeProcess:
         The system's parameter files, applied after the node's own config.
     remappings : dict
         Topic remappings ``{old: new}``.
+    arguments : tuple of str
+        The executable's own arguments, before ``--ros-args`` (e.g. ``rviz2 -d FILE``).
     name : str, optional
         Node name (``__node`` remap); also the key of its parameter sections.
     log_level : str, optional
@@ -63,6 +69,7 @@ class NodeProcess:
     shared_params: tuple[tuple[str, str], ...] = ()
     system_params: tuple[tuple[str, str], ...] = ()
     remappings: dict[str, str] = field(default_factory=dict)
+    arguments: tuple[str, ...] = ()
     name: str | None = None
     log_level: str | None = None
 
@@ -71,9 +78,13 @@ class NodeProcess:
         return self.name or self.executable
 
     def parameter_files(self) -> list[str]:
-        """The parameter files, in the order they apply (existing ones only)."""
+        """The parameter files, in the order they apply: the node's own one if it exists (a
+        package of another suite, or one not installed here, has none)."""
         files = [config_path(package, name) for package, name in self.shared_params]
-        own = config_path(self.package, f'{self.executable}.yaml')
+        try:
+            own = config_path(self.package, f'{self.executable}.yaml')
+        except PackageNotFoundError:
+            own = ''
         if os.path.isfile(own):
             files.append(own)
         return files + [config_path(package, name) for package, name in self.system_params]
@@ -97,7 +108,16 @@ class NodeProcess:
         """The command line, as ``ros2 run`` would exec it."""
         prefix = get_package_prefix(self.package)
         return [os.path.join(prefix, 'lib', self.package, self.executable),
-                *self.ros_arguments()]
+                *self.arguments, *self.ros_arguments()]
+
+
+def is_installed(package: str) -> bool:
+    """Whether the ament index knows ``package``."""
+    try:
+        get_package_prefix(package)
+    except PackageNotFoundError:
+        return False
+    return True
 
 
 def config_path(package: str, name: str) -> str:

@@ -18,12 +18,26 @@ Backends, for the robots:
 - ``sim_mcu``: ``hw_bridge`` in front of ``sim_mcu``, the simulated microcontroller on a
   pseudo-terminal: the hardware path, simulated;
 - ``hardware``: ``hw_bridge`` on the serial port of a real MCU.
+
+Visualization (`visualization_nodes`, ``--rviz``): ``robot_state_publisher`` on the estimator's
+deflected pose, the static frames (``world`` -> ``base_link``, ``world`` -> ``sra_mount``) and
+``rviz2`` with ``rviz/inflarm.rviz``: nodes of a ROS 2 Jazzy install, not of PyPI.
 """
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+import os
+import tempfile
 
-from inflarm_bringup.processes import NodeProcess
+from ament_index_python.packages import get_package_share_directory
+import yaml
+
+from inflarm_bringup.processes import NodeProcess, config_path
+from inflarm_model.nodes.arm_parameters import (
+    ARM_PARAMETERS,
+    check_arm_parameters,
+    urdf_from_parameters,
+)
 
 # The inflatable arm's geometry, stiffness and pressures, shared by every node that models it.
 ARM_CONFIG = (('inflarm_model', 'inflatable_arm.yaml'),)
@@ -43,6 +57,14 @@ class Backend:
             raise ValueError(f'backend must be one of {list(BACKENDS)}, got {self.kind!r}')
         if self.kind != 'sim' and not self.port:
             raise ValueError(f'backend {self.kind!r} needs a serial port')
+
+
+def backend(kind: str = 'sim', port: str = '') -> Backend:
+    """The backend ``kind`` on ``port``; for ``sim_mcu`` without one, a fresh path for the
+    simulated MCU's pty link."""
+    if kind == 'sim_mcu' and not port:
+        port = os.path.join(tempfile.mkdtemp(prefix='inflarm-mcu-'), 'mcu')
+    return Backend(kind, port)
 
 
 def _robots(plant: str, backend: Backend) -> tuple[NodeProcess, ...]:
@@ -109,3 +131,64 @@ def system_nodes(name: str, backend: Backend = Backend(), log_level: str | None 
         raise ValueError(f'system must be one of {list(SYSTEMS)}, got {name!r}')
     nodes = SYSTEMS[name](backend)
     return tuple(replace(n, log_level=log_level) for n in nodes) if log_level else nodes
+
+
+# Where the two arms stand in RViz's fixed frame: the inflatable arm's base at the origin, the
+# soft arm's mount 1.2 m beside it and 1.5 m up, its z axis down (the SRA hangs from its mount).
+STATIC_FRAMES = (
+    ('world', 'base_link', (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+    ('world', 'sra_mount', (1.2, 0.0, 1.5), (1.0, 0.0, 0.0, 0.0)),
+)
+"""(parent, child, translation [m], rotation xyzw) of each static transform."""
+VISUALIZATION_PACKAGES = ('robot_state_publisher', 'tf2_ros', 'rviz2')
+
+
+def arm_parameters_from_file(path: str) -> dict:
+    """The ``arm.*`` values a parameter file keyed ``/**`` (``inflatable_arm.yaml``) sets, with
+    the table's defaults for the others.
+
+    Raises
+    ------
+    ValueError
+        If the file is unreadable, not such a parameter file, or its values are inconsistent.
+    """
+    try:
+        with open(path) as file:
+            given = yaml.safe_load(file)['/**']['ros__parameters']
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
+        raise ValueError(f'{path}: not a parameter file keyed /** ({error!r})') from error
+    values = {p.name: given.get(p.name, p.default) for p in ARM_PARAMETERS}
+    problem = check_arm_parameters(values)
+    if problem is not None:
+        raise ValueError(f'{path}: {problem}')
+    return values
+
+
+def rviz_config() -> str:
+    """The installed RViz configuration: both arms, the load, the plan, the ball."""
+    return os.path.join(get_package_share_directory('inflarm_bringup'), 'rviz', 'inflarm.rviz')
+
+
+def visualization_nodes() -> tuple[NodeProcess, ...]:
+    """What RViz needs besides the system: TF of the estimated deflected arm (its URDF from
+    the shared arm configuration), the static frames, and rviz2 itself."""
+    urdf = urdf_from_parameters(arm_parameters_from_file(config_path(*ARM_CONFIG[0])))
+    frames = tuple(_static_frame(*frame) for frame in STATIC_FRAMES)
+    return (
+        # The deflected arm: all seven joints of the estimate. The node's own copy of the
+        # description goes aside; robot_description publishes the system's.
+        NodeProcess('robot_state_publisher', 'robot_state_publisher',
+                    parameters={'robot_description': urdf},
+                    remappings={'joint_states': 'estimated_joint_states',
+                                'robot_description': 'robot_state_publisher/robot_description'}),
+        *frames,
+        NodeProcess('rviz2', 'rviz2', arguments=('-d', rviz_config())),
+    )
+
+
+def _static_frame(parent: str, child: str, xyz: tuple, xyzw: tuple) -> NodeProcess:
+    names = ('--x', '--y', '--z', '--qx', '--qy', '--qz', '--qw')
+    pairs = zip(names, (repr(float(v)) for v in (*xyz, *xyzw)), strict=True)
+    return NodeProcess('tf2_ros', 'static_transform_publisher', name=f'{child}_frame',
+                       arguments=(*(a for pair in pairs for a in pair),
+                                  '--frame-id', parent, '--child-frame-id', child))

@@ -28,11 +28,20 @@ the trial (the steady part of the paper's recorded output, which the slow PID re
 the error is gone). The last entry learns from the mean error of the rest of the trial. The
 literal reading (the previous output added to every increment) compounds through eq. (3); the
 reading "next output = previous output + this trial's accumulated PID" learns through an
-integrator without lead and diverges on the simulated arm.
+integrator without lead: on the simulated arm it diverges with the default ``P_set`` and
+converges, more slowly than this one, with ``P_set`` at the target's holding pressures.
 
 Errors are taken along each actuator's push direction, ``e = s (zeta_d - zeta_e)`` with
 ``s = +1`` for PEA and for the bellows pushing towards ``+x``/``+y``, ``-1`` otherwise; the paper's
 ``e = zeta_e - zeta_d`` with positive gains would push away from the target.
+
+Antagonistic bellows (``PidIlcParams.bellows_preload > 0``, not in the paper): instead of the
+quadrant rule, each lateral axis drives its bellows pair (B4/B2 for x, B3/B1 for y) with a signed
+output ``u`` (`antagonistic_pressures`): ``P_+ = P_0 + max(u, 0)``, ``P_- = P_0 + max(-u, 0)``.
+With the preload ``P_0`` above the valves' dead zone (0-4 kPa) neither bellows ever exhausts, so
+an axis passes through zero without the jump of a bellows leaving the dead zone (the limit cycle
+near the axes of section 4.3.2), and a small correction towards an axis (the bend skew) is
+possible on either side. The laws above then act on ``u`` with ``s = +1``.
 
 Everything is vectorized over a leading axis of ``n`` tasks (arms). Pure numpy, no rclpy.
 """
@@ -56,6 +65,64 @@ from inflarm_model.soft_arm import (
 )
 
 _N_CHAMBERS = len(CHAMBERS)
+_PEA = CHAMBERS.index('PEA')
+# (bellows pushing towards +axis, bellows pushing towards -axis) for x and y (BELLOWS_PUSH)
+_PAIRS = np.array([[CHAMBERS.index(b) for b in pair] for pair in (('B4', 'B2'), ('B3', 'B1'))])
+
+
+def axis_outputs(pressures: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Signed axis outputs of chamber pressures: ``(B4 - B2, B3 - B1, PEA)``.
+
+    Parameters
+    ----------
+    pressures : array-like, shape (..., 5)
+        Chamber pressures in `CHAMBERS` order [Pa].
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        x, y: the pressure of the bellows pushing towards ``+x`` (``+y``) minus the one pushing
+        towards ``-x`` (``-y``); z: the PEA pressure [Pa]. The inverse of
+        `antagonistic_pressures` for any preload.
+    """
+    p = np.asarray(pressures, dtype=float)
+    if p.ndim == 0 or p.shape[-1] != _N_CHAMBERS:
+        raise ValueError(f'expected pressures of shape (..., 5), got {p.shape}')
+    return np.stack([p[..., _PAIRS[0, 0]] - p[..., _PAIRS[0, 1]],
+                     p[..., _PAIRS[1, 0]] - p[..., _PAIRS[1, 1]], p[..., _PEA]], axis=-1)
+
+
+def antagonistic_pressures(
+    outputs: npt.ArrayLike, preload: float
+) -> npt.NDArray[np.float64]:
+    """Chamber pressures of signed axis outputs, each bellows pair driven antagonistically.
+
+    ``P_+ = P_0 + max(u, 0)`` for the bellows pushing towards ``+axis`` (B4 for x, B3 for y),
+    ``P_- = P_0 + max(-u, 0)`` for its opposite (B2, B1), PEA = ``u_z``.
+
+    Parameters
+    ----------
+    outputs : array-like, shape (..., 3)
+        Signed outputs ``(u_x, u_y, u_z)`` [Pa] (`axis_outputs`).
+    preload : float
+        ``P_0``: pressure of both bellows of a pair at ``u = 0`` [Pa], >= 0.
+
+    Returns
+    -------
+    ndarray, shape (..., 5)
+        In `CHAMBERS` order [Pa].
+    """
+    u = np.asarray(outputs, dtype=float)
+    if u.ndim == 0 or u.shape[-1] != 3:
+        raise ValueError(f'expected outputs of shape (..., 3), got {u.shape}')
+    if not (np.isfinite(preload) and preload >= 0.0):
+        raise ValueError(f'expected preload >= 0 Pa, got {preload}')
+    pressures = np.empty(u.shape[:-1] + (_N_CHAMBERS,))
+    pressures[..., _PEA] = u[..., 2]
+    for axis in range(2):
+        pressures[..., _PAIRS[axis, 0]] = preload + np.maximum(u[..., axis], 0.0)
+        pressures[..., _PAIRS[axis, 1]] = preload + np.maximum(-u[..., axis], 0.0)
+    return pressures
 
 
 @dataclass(frozen=True)
@@ -105,7 +172,12 @@ class PidIlcParams:
         the paper's recorded output that is steady) to the next trial. 0.3.
     quadrant_bellows : tuple of 4 (str, str)
         Quadrant 1-4 -> (bellows driving x, bellows driving y); Fig 4 by default. The x bellows
-        must be B2 or B4, the y bellows B1 or B3.
+        must be B2 or B4, the y bellows B1 or B3. Not used with a ``bellows_preload``.
+    bellows_preload : float
+        0 (default): the paper's quadrant rule, one bellows per axis, the others at 0 Pa.
+        ``> 0``: each bellows pair is driven antagonistically around this common pressure [Pa]
+        (module docstring); above the valves' 4 kPa dead zone to be useful, below every
+        bellows' ``p_max``.
     workspace : Workspace
         Bounds that start and target must respect (positive pressure, Fig 5A, by default).
     """
@@ -126,6 +198,7 @@ class PidIlcParams:
     quadrant_bellows: tuple[tuple[str, str], ...] = field(
         default=tuple(QUADRANT_BELLOWS[q] for q in (1, 2, 3, 4)))
     workspace: Workspace = WORKSPACE_POSITIVE
+    bellows_preload: float = 0.0
 
     def __post_init__(self) -> None:
         for name, size in (('kp', 3), ('ki', 3), ('kd', 3), ('p_set', 3), ('p_max', 5),
@@ -151,6 +224,10 @@ class PidIlcParams:
                 f'expected integer learning_lead_steps, got {self.learning_lead_steps}')
         if not (np.isfinite(self.learning_dead_band) and self.learning_dead_band >= 0.0):
             raise ValueError(f'expected learning_dead_band >= 0 m, got {self.learning_dead_band}')
+        if not (np.isfinite(self.bellows_preload)
+                and 0.0 <= self.bellows_preload < min(self.p_max[1:])):
+            raise ValueError(f'expected 0 <= bellows_preload < the bellows p_max '
+                             f'{min(self.p_max[1:])} Pa, got {self.bellows_preload}')
         if len(self.quadrant_bellows) != 4:
             raise ValueError(
                 f'expected quadrant_bellows for 4 quadrants, got {len(self.quadrant_bellows)}')
@@ -212,6 +289,8 @@ class PidIlcController:
         self._ki = np.asarray(params.ki, dtype=float)
         self._kd = np.asarray(params.kd, dtype=float)
         self._lead = np.asarray(params.learning_lead_steps, dtype=np.int64)
+        self._preload = float(params.bellows_preload)
+        self._antagonistic = self._preload > 0.0
         # errors are kept for the steps whose lead reaches into the memory window
         self._n_errors = params.memory_steps + int(self._lead.max())
         self._tail_start = params.memory_steps - 1 + self._lead  # (3,) first tail step per axis
@@ -228,7 +307,8 @@ class PidIlcController:
 
     @property
     def chamber_of_axis(self) -> npt.NDArray[np.int64]:
-        """Index into `CHAMBERS` of the chamber driving x, y, z per task, shape (n, 3)."""
+        """Index into `CHAMBERS` of the chamber driving x, y, z per task, shape (n, 3) (with a
+        ``bellows_preload``: the bellows pushing towards ``+x`` and ``+y``, B4 and B3)."""
         return self._chamber.copy()
 
     @property
@@ -290,17 +370,32 @@ class PidIlcController:
         if memory is None or not p.learning:
             mem = np.broadcast_to(init[:, None, :], (n, m, _N_CHAMBERS))
 
-        quadrant = quadrant_of(target[:, 0], target[:, 1]) - 1
         self._chamber = np.empty((n, 3), dtype=np.int64)
-        self._chamber[:, :2] = self._table[quadrant]
-        self._chamber[:, 2] = CHAMBERS.index('PEA')
+        self._chamber[:, 2] = _PEA
         self._sign = np.ones((n, 3))
-        self._sign[:, :2] = self._table_push[quadrant]
-        self._p_max_axis = np.asarray(p.p_max, dtype=float)[self._chamber]
-        self._p_set_axis = np.minimum(np.asarray(p.p_set, dtype=float), self._p_max_axis)
+        p_max = np.asarray(p.p_max, dtype=float)
+        p_set = np.asarray(p.p_set, dtype=float)
+        if self._antagonistic:
+            # signed outputs per axis: [-(p_max of the - bellows - P_0), p_max of + - P_0]
+            self._chamber[:, :2] = _PAIRS[:, 0]
+            self._p_max_axis = np.broadcast_to(
+                np.append(p_max[_PAIRS[:, 0]] - self._preload, p_max[_PEA]), (n, 3)).copy()
+            self._p_min_axis = np.broadcast_to(
+                np.append(self._preload - p_max[_PAIRS[:, 1]], 0.0), (n, 3)).copy()
+            ff = axis_outputs(mem)
+            output = axis_outputs(init)
+        else:
+            quadrant = quadrant_of(target[:, 0], target[:, 1]) - 1
+            self._chamber[:, :2] = self._table[quadrant]
+            self._sign[:, :2] = self._table_push[quadrant]
+            self._p_max_axis = p_max[self._chamber]
+            self._p_min_axis = np.zeros((n, 3))
+            ff = np.take_along_axis(mem, self._chamber[:, None, :], axis=2)
+            output = np.take_along_axis(init, self._chamber, axis=1)
+        self._p_set_axis = np.minimum(p_set, self._p_max_axis)
+        self._p_set_min_axis = np.maximum(-p_set, self._p_min_axis)
         # feedforward per axis (n, m, 3), capped at P_set (eq. 4)
-        ff = np.take_along_axis(mem, self._chamber[:, None, :], axis=2)
-        self._ff = np.minimum(ff, self._p_set_axis[:, None, :])
+        self._ff = np.clip(ff, self._p_set_min_axis[:, None, :], self._p_set_axis[:, None, :])
         self.start = start
         self.target = target
         self._accumulated = np.zeros((n, 3))
@@ -308,9 +403,8 @@ class PidIlcController:
         self._previous_error = np.zeros((n, 3))
         self._have_previous = np.zeros((n, 1), dtype=bool)
         self._since_valid = np.zeros((n, 1))
-        self._output = np.take_along_axis(init, self._chamber, axis=1)
-        self._command = np.zeros((n, _N_CHAMBERS))
-        self._command[self._rows, self._chamber] = self._output
+        self._output = np.clip(output, self._p_min_axis, self._p_max_axis)
+        self._command = self._chamber_command(self._output)
         self._errors = np.full((n, self._n_errors, 3), np.nan)  # NaN = no fresh measurement
         self._tail_sum = np.zeros((n, 3))
         self._tail_count = np.zeros((n, 3))
@@ -318,6 +412,14 @@ class PidIlcController:
         self._active = True
         if n == 1:
             self._start_single()
+
+    def _chamber_command(self, output: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Valve set pressures (n, 5) of the axis outputs (n, 3)."""
+        if self._antagonistic:
+            return antagonistic_pressures(output, self._preload)
+        command = np.zeros((output.shape[0], _N_CHAMBERS))
+        command[self._rows, self._chamber] = output
+        return command
 
     # -- n = 1: the same arithmetic on Python floats (numpy's per-call overhead dominates) ------
 
@@ -327,6 +429,7 @@ class PidIlcController:
         self._s_target = self.target[0].tolist()
         self._s_ff = self._ff[0].tolist()
         self._s_p_max = self._p_max_axis[0].tolist()
+        self._s_p_min = self._p_min_axis[0].tolist()
         self._s_chamber = self._chamber[0].tolist()
         self._s_tail_start = self._tail_start.tolist()
         self._s_accumulated = [0.0, 0.0, 0.0]
@@ -370,9 +473,9 @@ class PidIlcController:
                 raw = ff[a] + self._s_accumulated[a] + (
                     self._s_kp[a] * error + self._s_ki[a] * integral
                     + self._s_kd[a] * derivative)
-                p_max = self._s_p_max[a]
-                output = min(max(raw, 0.0), p_max)
-                if not ((raw > p_max and error > 0.0) or (raw < 0.0 and error < 0.0)):
+                p_max, p_min = self._s_p_max[a], self._s_p_min[a]
+                output = min(max(raw, p_min), p_max)
+                if not ((raw > p_max and error > 0.0) or (raw < p_min and error < 0.0)):
                     self._s_integral[a] = integral
                 self._s_accumulated[a] = output - ff[a]
                 self._s_previous[a] = error
@@ -389,6 +492,8 @@ class PidIlcController:
         if k < self._n_errors:
             self._s_errors.append(errors)
         self._k = k + 1
+        if self._antagonistic:
+            return antagonistic_pressures(np.array([self._s_output]), self._preload)
         command = [0.0] * _N_CHAMBERS
         for a in range(3):
             command[self._s_chamber[a]] = self._s_output[a]
@@ -423,7 +528,7 @@ class PidIlcController:
         -------
         command : ndarray, shape (n, 5)
             Valve set pressures in `CHAMBERS` order [Pa], within ``[0, p_max]``; chambers not
-            driving an axis get 0.
+            driving an axis get 0 (every bellows at least ``bellows_preload`` with one).
 
         Raises
         ------
@@ -461,10 +566,11 @@ class PidIlcController:
         derivative = np.where(self._have_previous, (error - self._previous_error) / elapsed, 0.0)
         raw = ff + self._accumulated + (self._kp * error + self._ki * integral
                                         + self._kd * derivative)
-        output = np.minimum(np.maximum(raw, 0.0), self._p_max_axis)
+        output = np.minimum(np.maximum(raw, self._p_min_axis), self._p_max_axis)
         # anti-windup: keep the integral only while the output is not pinned against a limit
         # in the direction the error is pushing
-        pinned = ((raw > self._p_max_axis) & (error > 0.0)) | ((raw < 0.0) & (error < 0.0))
+        pinned = (((raw > self._p_max_axis) & (error > 0.0))
+                  | ((raw < self._p_min_axis) & (error < 0.0)))
         integral = np.where(pinned, self._integral, integral)
         accumulated = output - ff  # back-calculation: clipping never winds up eq. (3)
         if ok is None:
@@ -490,7 +596,7 @@ class PidIlcController:
             fresh = np.isfinite(recorded) & tail
             self._tail_sum += np.where(fresh, recorded, 0.0)
             self._tail_count += fresh
-        self._command[self._rows, self._chamber] = self._output
+        self._command = self._chamber_command(self._output)
         self._k = k + 1
         return self._command.copy()
 
@@ -505,7 +611,8 @@ class PidIlcController:
         -------
         memory : ndarray, shape (n, memory_steps, 5)
             Feedforward valve outputs per step in `CHAMBERS` order [Pa], each axis' chamber
-            within ``[0, p_set]``, the other chambers 0.
+            within ``[0, p_set]``, the other chambers 0 (with a ``bellows_preload``: each pair's
+            signed output within ``[-p_set, p_set]``, by `antagonistic_pressures`).
         """
         if not self._active:
             raise ValueError('expected start_trial() before finish_trial()')
@@ -534,9 +641,13 @@ class PidIlcController:
         update = np.asarray(p.learning_gain) * _moving_average(taught, p.learning_filter_steps)
         # the PID's final correction is the steady-state offset the whole feedforward lacked
         update += np.asarray(p.learning_feedback_gain) * self._accumulated[:, None, :]
-        learned = np.clip(self._ff + update, 0.0, self._p_set_axis[:, None, :])
-        memory = np.zeros((self.n, m, _N_CHAMBERS))
-        memory[self._rows, :, self._chamber] = learned.transpose(0, 2, 1)
+        learned = np.clip(self._ff + update, self._p_set_min_axis[:, None, :],
+                          self._p_set_axis[:, None, :])
+        if self._antagonistic:
+            memory = antagonistic_pressures(learned, self._preload)
+        else:
+            memory = np.zeros((self.n, m, _N_CHAMBERS))
+            memory[self._rows, :, self._chamber] = learned.transpose(0, 2, 1)
         self._active = False
         return memory
 
@@ -550,9 +661,11 @@ class TrialResults:
     times : ndarray, shape (steps + 1,)
         Sample times from the start of each trial [s]; sample ``k`` is taken before command ``k``.
     trajectories : ndarray, shape (n_trials, steps + 1, n, 3) or None
-        Measured end points per trial, sample and task in ``sra_mount`` [m] (None if not kept).
+        Measured end points per trial, sample and task in ``sra_mount`` [m], NaN where the
+        measurement dropped out (None if not kept).
     rmse : ndarray, shape (n_trials, n, 3)
-        Root-mean-square of ``zeta_e - zeta_d`` over all samples of a trial, per axis [m] (Fig 8).
+        Root-mean-square of ``zeta_e - zeta_d`` over the measured samples of a trial, per axis
+        [m] (Fig 8).
     reach_time : ndarray, shape (n_trials, n, 3)
         Per axis, the first sample time after which the measured coordinate stays within
         ``tolerance`` of the target until the end of the trial [s]; ``inf`` if it is outside at
@@ -595,7 +708,10 @@ def run_trials(
     ----------
     plant : SoftArmPlant-like
         Object with ``n``, ``reset(end_point=...)``, ``chamber_pressures``, ``measure()`` and
-        ``step(command, dt)`` (e.g. ``inflarm_hw.sra_plant.SoftArmPlant``).
+        ``step(command, dt)`` (e.g. ``inflarm_hw.sra_plant.SoftArmPlant``). A row of NaN from
+        ``measure()`` is a vision dropout of that task: the controller holds and learns nothing
+        from the step (``PidIlcController.step(..., valid)``), and the sample counts in neither
+        RMSE nor reach time.
     controller : PidIlcController
         Controller with the same ``n`` as the plant.
     start, target : array-like, shape (3,) or (n, 3)
@@ -643,9 +759,11 @@ def run_trials(
             y = plant.measure()
             if trajectories is not None:
                 trajectories[t, k] = y
-            metrics.add(y, times[k])
+            valid = np.isfinite(y).all(axis=-1)
+            valid = None if valid.all() else valid  # a NaN row: that task's dropout
+            metrics.add(y, times[k], valid)
             if k < steps:
-                plant.step(controller.step(y, dt), dt)
+                plant.step(controller.step(y, dt, valid), dt)
         memory = controller.finish_trial()
         rmse[t] = metrics.rmse
         reach[t] = metrics.reach_time

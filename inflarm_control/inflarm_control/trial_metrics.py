@@ -36,32 +36,47 @@ class TrialMetrics:
         self.target = np.atleast_2d(target)
         self.tolerance = float(tolerance)
         self.samples = 0
+        self._counts = np.zeros((self.target.shape[0], 1))
         self._squared = np.zeros(self.target.shape)
         self._outside = np.zeros(self.target.shape, dtype=bool)
         self._inside_since = np.full(self.target.shape, np.inf)
 
-    def add(self, end_point: npt.ArrayLike, time: float) -> None:
+    def add(self, end_point: npt.ArrayLike, time: float,
+            valid: npt.ArrayLike | None = None) -> None:
         """Add one sample of the measured end point, shape like ``target``, taken at ``time`` [s]
-        from the start of the trial."""
+        from the start of the trial.
+
+        ``valid`` (bool, shape (n,), optional) marks the tasks that have a measurement; the
+        others (NaN allowed there) are left out of their RMSE and reach time. Default: all.
+        """
         point = np.atleast_2d(np.asarray(end_point, dtype=float))
-        if point.shape != self.target.shape or not np.isfinite(point).all():
+        if valid is None:
+            ok = np.ones((self.target.shape[0], 1), dtype=bool)
+        else:
+            ok = np.asarray(valid, dtype=bool)
+            if ok.shape != (self.target.shape[0],):
+                raise ValueError(
+                    f'expected valid of shape ({self.target.shape[0]},), got {ok.shape}')
+            ok = ok[:, None]
+        if point.shape != self.target.shape or not np.isfinite(np.where(ok, point, 0.0)).all():
             raise ValueError(
                 f'expected a finite end_point of shape {self.target.shape}, got '
                 f'{np.shape(end_point)} {np.asarray(end_point).tolist()}')
-        error = point - self.target
+        error = np.where(ok, point - self.target, 0.0)
         self._squared += error * error
+        self._counts += ok
         self.samples += 1
         outside = np.abs(error) > self.tolerance
         entered = ~outside & (self._outside | np.isinf(self._inside_since))
-        self._inside_since = np.where(outside, np.inf,
-                                      np.where(entered, time, self._inside_since))
-        self._outside = outside
+        inside_since = np.where(outside, np.inf, np.where(entered, time, self._inside_since))
+        self._inside_since = np.where(ok, inside_since, self._inside_since)
+        self._outside = np.where(ok, outside, self._outside)
 
     @property
     def rmse(self) -> npt.NDArray[np.float64]:
-        """RMSE per axis so far, shape (n, 3) [m]; NaN before the first sample."""
+        """RMSE per axis so far, shape (n, 3) [m]; NaN before a task's first sample."""
         with np.errstate(invalid='ignore', divide='ignore'):
-            return np.sqrt(self._squared / self.samples)
+            return np.sqrt(self._squared / self._counts)
 
     @property
     def reach_time(self) -> npt.NDArray[np.float64]:

@@ -12,8 +12,8 @@ arms. Pure numpy, no rclpy.
 
 Signal chain per arm and chamber (``CHAMBERS`` order: PEA, B1, B2, B3, B4)::
 
-    command [Pa] -> valve voltage (eq. 2) -> valve output [Pa] (dead zone, range;
-      both in `inflarm_hw.valve`)
+    command [Pa] -> valve voltage (eq. 2) -> transport delay (dead time)
+      -> valve output [Pa] (dead zone, range; both in `inflarm_hw.valve`)
       -> chamber pressure (first order, time constant growing with chamber volume)
       -> static extension / bend (saturating, bellows stiff below a threshold pressure)
       -> play operator (hysteresis) -> mechanics (extension: 2nd order; bend: 1st order)
@@ -25,6 +25,10 @@ Q3 = B1 + B2, Q4 = B1 + B4. Bending lowers z (``z = l1 (1 + cos(theta))``), whic
 coupling the paper's z controller has to fight. With all chambers at 0 Pa the arm rests straight
 at ``(0, 0, 0.604)`` m, the initial point of the Fig 7 experiment, so a trial starts from the
 paper's initial output of 0 kPa (eq. 3).
+
+By default the valves act 0.1 s after their command and `SoftArmPlant.measure` adds 0.5 mm of
+noise per axis (`SoftArmPlantParams`); `NOISE_FREE` keeps the delay and measures exactly
+(deterministic trials), `IDEAL` has neither (instantaneous valves, exact measurements).
 """
 
 from dataclasses import dataclass
@@ -99,9 +103,20 @@ class SoftArmPlantParams:
         Largest internal integration step [s]; a ``step(dt)`` is split into equal substeps no
         longer than this. 0.05 s (4 substeps at 5 Hz) keeps the axial oscillator
         (omega h = 0.15) accurate; pressures are integrated exactly per substep.
+    valve_delay : float
+        Transport delay (dead time) between a command and the valves' output [s]: a command
+        given at ``t`` sets the valve outputs from ``t + valve_delay`` on. 0.1 s: the response
+        time class of electro-pneumatic regulators of the ITV2050's size (their catalogue
+        response time without load is of this order; the prototype's valves were not
+        characterized in the paper), of which the pressure wave's travel along ~2 m of tubing
+        (~6 ms at the speed of sound) is a small part. These are the "various unavoidable
+        delays in the control system" of section 3.1 that the controller has to cope with.
+        0 gives the ideal, instantaneous valves.
     noise_std : float
         Standard deviation of the vision noise added per axis by `SoftArmPlant.measure` [m].
-        0 by default (deterministic trials); ~0.5e-3 m mimics the camera.
+        0.5 mm by default: the spread of the simulated camera + tracker over the work space
+        (median 3D error 0.6 mm, `inflarm_vision/README.md`), for callers that measure the end
+        point without rendering images. 0 for deterministic trials (`NOISE_FREE`).
     """
 
     pea_rest_length: float = 0.302
@@ -121,7 +136,8 @@ class SoftArmPlantParams:
     bend_play: float = 0.005
     valve: ValveModel = ITV2050
     max_substep: float = 0.05
-    noise_std: float = 0.0
+    valve_delay: float = 0.1
+    noise_std: float = 0.5e-3
 
     def __post_init__(self) -> None:
         if not isinstance(self.valve, ValveModel):
@@ -138,10 +154,17 @@ class SoftArmPlantParams:
             if getattr(self, name) <= 0.0:
                 raise ValueError(f'expected {name} > 0, got {getattr(self, name)}')
         non_negative = ('bellows_threshold', 'bellows_volume_gain', 'extension_play',
-                        'bend_play', 'noise_std')
+                        'bend_play', 'valve_delay', 'noise_std')
         for name in non_negative:
             if getattr(self, name) < 0.0:
                 raise ValueError(f'expected {name} >= 0, got {getattr(self, name)}')
+
+
+NOISE_FREE = SoftArmPlantParams(noise_std=0.0)
+"""The default plant (valve delay included) with exact measurements: deterministic trials."""
+
+IDEAL = SoftArmPlantParams(valve_delay=0.0, noise_std=0.0)
+"""Instantaneous valves and exact measurements (the simulated plant before the valve delay)."""
 
 
 class SoftArmPlant:
@@ -204,6 +227,10 @@ class SoftArmPlant:
         pressures = None if end_point is None else self.holding_pressures(end_point)
         self.time = 0.0
         self._pressure = np.zeros((n, _N_CHAMBERS))
+        # valve outputs now [Pa], and the commanded ones still in the delay line:
+        # (time they reach the valve outputs [s], outputs (n, 5) [Pa]), oldest first
+        self._valve_output = np.zeros((n, _N_CHAMBERS))
+        self._pending: list[tuple[float, npt.NDArray[np.float64]]] = []
         self._tau = np.empty((n, _N_CHAMBERS))
         self._bellows = np.zeros((n, 4))  # static bend per bellows B1..B4 [rad]
         self._shape = np.zeros((n, 3))  # static (extension [m], bx, by [rad])
@@ -214,6 +241,7 @@ class SoftArmPlant:
         if pressures is None:
             return
         self._pressure[:] = pressures
+        self._valve_output[:] = pressures  # the valves have been holding them
         self._update_static_shape()
         self._shape_play[:] = self._shape
         self._extension[:] = self._shape[:, 0]
@@ -223,6 +251,12 @@ class SoftArmPlant:
     def chamber_pressures(self) -> npt.NDArray[np.float64]:
         """Chamber pressures, shape (n, 5), in `CHAMBERS` order [Pa] (a copy)."""
         return self._pressure.copy()
+
+    @property
+    def valve_outputs(self) -> npt.NDArray[np.float64]:
+        """Pressures the valves deliver now, shape (n, 5), in `CHAMBERS` order [Pa] (a copy):
+        the command of ``params.valve_delay`` ago through eq. (2) and the dead zone."""
+        return self._valve_output.copy()
 
     @property
     def end_point(self) -> npt.NDArray[np.float64]:
@@ -375,9 +409,10 @@ class SoftArmPlant:
         Parameters
         ----------
         voltages : array-like, shape (n, 5) or (5,)
-            Control voltage of each valve in `CHAMBERS` order [V]. Each valve delivers eq. (2)
-            of it (clamped to its input range, 0 Pa in the dead zone), and its chamber's
-            pressure follows that output.
+            Control voltage of each valve in `CHAMBERS` order [V]. From ``params.valve_delay``
+            after now on, each valve delivers eq. (2) of it (clamped to its input range, 0 Pa
+            in the dead zone) until the next command arrives, and its chamber's pressure
+            follows that output.
         dt : float
             Duration [s], > 0; integrated in substeps of at most ``params.max_substep``.
         """
@@ -389,8 +424,26 @@ class SoftArmPlant:
             raise ValueError('expected finite voltages [V]')
         if not (dt > 0.0 and np.isfinite(dt)):
             raise ValueError(f'expected dt > 0 s, got {dt}')
+        output = np.broadcast_to(self.valve_pressure(u), self._pressure.shape).copy()
+        self._pending.append((self.time + self.params.valve_delay, output))
+        # integrate piecewise: the valve outputs change when a command leaves the delay line
+        # (times within 1 ns count as equal: steps of dt add up with rounding errors)
+        now, end = self.time, self.time + dt
+        while True:
+            while self._pending and self._pending[0][0] <= now + 1e-9:
+                self._valve_output = self._pending.pop(0)[1]
+            until = self._pending[0][0] if self._pending else end
+            if until >= end - 1e-9:
+                self._integrate(end - now)
+                break
+            self._integrate(until - now)
+            now = until
+        self.time = end
+
+    def _integrate(self, dt: float) -> None:
+        """Advance the chambers and mechanics by ``dt`` [s] under constant valve outputs."""
         p = self.params
-        target = np.broadcast_to(self.valve_pressure(u), self._pressure.shape)
+        target = self._valve_output
         n_sub = max(1, int(np.ceil(dt / p.max_substep - 1e-9)))
         h = dt / n_sub
         w = p.extension_natural_frequency
@@ -414,4 +467,3 @@ class SoftArmPlant:
             self._extension_rate += spring * (self._shape_play[:, 0] - self._extension)
             self._extension += h * self._extension_rate
             self._bend += (self._shape_play[:, 1:] - self._bend) * bend_alpha
-        self.time += dt

@@ -42,6 +42,7 @@ __all__ = [
     'BallTruth',
     'Lighting',
     'Scene',
+    'SraCamera',
     'SyntheticCamera',
     'SyntheticFrame',
 ]
@@ -462,3 +463,72 @@ class SyntheticCamera:
                             * np.maximum((normal * half).sum(-1), 0.0) ** light.shininess, 0.0)
         albedo = np.asarray(self.scene.ball_bgr, dtype=float)
         return (shade[..., None] * albedo + 255.0 * specular[..., None]).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class SraCamera:
+    """The soft arm's simulated external camera: the one definition of its defaults.
+
+    ``sra_sim`` and ``sim_mcu`` declare their ``camera.*`` parameters with these defaults
+    (``inflarm_hw.nodes.camera_publisher``), and tools that close the loop through the camera
+    without ROS render with `renderer` (``inflarm-sra-experiments --camera``).
+
+    Attributes
+    ----------
+    width, height : int
+        Image size [px].
+    focal_px : float
+        Focal length, square pixels, principal point at the image centre [px].
+    distortion : tuple of 5 float
+        plumb_bob k1, k2, p1, p2, k3.
+    translation_m : tuple of 3 float
+        Camera (optical frame) origin in ``sra_mount`` [m].
+    rotation_xyzw : tuple of 4 float
+        Camera -> mount rotation, quaternion. With ``translation_m`` the defaults are
+        ``look_at([0, -1.1, 0.78], [0, 0, 0.78])``: 1.1 m from the arm's axis on -y, level with
+        the middle of the work space, looking along +y.
+    ball_diameter_m : float
+        Diameter of the yellow ball [m] (the paper gives none: a 40 mm table-tennis ball).
+    background : str
+        One of `BACKGROUNDS`.
+    noise_std, blur_sigma_px, exposure : float
+        Sensor noise [grey levels], blur [px] and exposure gain (`Scene`).
+    latency_s : float
+        Delay from capture to publication [s] (the nodes' publisher; `renderer` ignores it).
+    """
+
+    width: int = 640
+    height: int = 480
+    focal_px: float = 900.0
+    distortion: tuple[float, ...] = (-0.12, 0.05, 0.0, 0.0, 0.0)
+    translation_m: tuple[float, float, float] = (0.0, -1.1, 0.78)
+    rotation_xyzw: tuple[float, float, float, float] = (0.0, 0.70710678, 0.70710678, 0.0)
+    ball_diameter_m: float = 0.04
+    background: str = 'noise'
+    noise_std: float = 1.5
+    blur_sigma_px: float = 0.5
+    exposure: float = 1.0
+    latency_s: float = 0.03
+
+    def camera(self) -> PinholeCamera:
+        """The intrinsics (`PinholeCamera.ideal`); ``ValueError`` on bad ones."""
+        return PinholeCamera.ideal(self.width, self.height, self.focal_px, d=self.distortion)
+
+    def camera2mount(self) -> RigidTransform:
+        """The camera's pose in ``sra_mount``; ``ValueError`` on a bad quaternion."""
+        return RigidTransform.from_quaternion(self.translation_m, self.rotation_xyzw)
+
+    def renderer(self, seed: int | None = None) -> 'SyntheticCamera':
+        """The `SyntheticCamera` of this set-up, seeded (None: a random seed).
+
+        Raises
+        ------
+        ValueError
+            Naming the value that is wrong.
+        """
+        scene = Scene(background=self.background, noise_std=self.noise_std,
+                      blur_sigma_px=self.blur_sigma_px, exposure=self.exposure)
+        if not (math.isfinite(self.ball_diameter_m) and self.ball_diameter_m > 0.0):
+            raise ValueError(f'expected ball_diameter_m > 0 [m], got {self.ball_diameter_m}')
+        return SyntheticCamera(self.camera(), self.camera2mount(), 0.5 * self.ball_diameter_m,
+                               scene, seed=seed)

@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 
+from inflarm_bringup.knowledge_cli import knowledge_plant
 from inflarm_control.knowledge import (
     DEFAULT_GRID,
     DEFAULT_SCALE_PA_PER_LSB,
@@ -19,7 +20,6 @@ from inflarm_control.knowledge import (
     seed_memory,
 )
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams, run_trials
-from inflarm_hw.sra_plant import SoftArmPlant
 
 # A 4 x 3 x 5 grid with a different spacing and origin from the default one.
 SMALL = KnowledgeGrid(origin=(0.05, -0.02, 0.70), spacing=0.02, shape=(4, 3, 5))
@@ -314,7 +314,7 @@ AROUND = KnowledgeGrid(origin=(0.10, 0.09, 0.72), spacing=0.01, shape=(3, 3, 3))
 @pytest.fixture(scope='module')
 def built(tmp_path_factory):
     path = tmp_path_factory.mktemp('kdb') / 'around.db'
-    db = build_knowledge_database(path, AROUND, plant_factory=SoftArmPlant, batch_size=10,
+    db = build_knowledge_database(path, AROUND, plant_factory=knowledge_plant, batch_size=10,
                                   workers=1, progress=False)
     yield db
     db.close()
@@ -332,7 +332,7 @@ def test_build_fills_every_point_with_the_last_trials_memory(built):
     # The same 30 trials run directly give the stored memory, to half an LSB.
     index = AROUND.index_of((0.11, 0.10, 0.73))
     result = run_trials(
-        SoftArmPlant(1), PidIlcController(1), HOME_POINT, AROUND.point_of(index), 30, 10.0
+        knowledge_plant(1), PidIlcController(1), HOME_POINT, AROUND.point_of(index), 30, 10.0
     )
     half_lsb = DEFAULT_SCALE_PA_PER_LSB / 2 + 1e-9
     np.testing.assert_allclose(built.read(index), result.memory[0], atol=half_lsb)
@@ -345,9 +345,9 @@ def test_seeded_first_trial_reaches_within_8_s_faster_than_pid(built):
         nearest_knowledge_point(targets), [(0.11, 0.10, 0.73), (0.10, 0.09, 0.72)], atol=1e-12
     )
     memory = seed_memory(built, targets)
-    seeded = run_trials(SoftArmPlant(2), PidIlcController(2), HOME_POINT, targets, 1, 10.0,
+    seeded = run_trials(knowledge_plant(2), PidIlcController(2), HOME_POINT, targets, 1, 10.0,
                         memory=memory, keep_trajectories=False)
-    pid = run_trials(SoftArmPlant(2), PidIlcController(2), HOME_POINT, targets, 1, 10.0,
+    pid = run_trials(knowledge_plant(2), PidIlcController(2), HOME_POINT, targets, 1, 10.0,
                      keep_trajectories=False)
     reach_seeded, reach_pid = seeded.reach_time[0], pid.reach_time[0]  # (2 tasks, 3 axes) [s]
     assert np.all(reach_seeded <= 8.0), reach_seeded
@@ -360,7 +360,7 @@ def test_build_resumes_only_the_missing_points(tmp_path, built):
     with KnowledgeDatabase.create(path, AROUND) as db:
         db.write([0, 26], np.full((2, 50, 5), 150.0))
     db = build_knowledge_database(
-        path, AROUND, plant_factory=SoftArmPlant, n_trials=30, batch_size=13, workers=1,
+        path, AROUND, plant_factory=knowledge_plant, n_trials=30, batch_size=13, workers=1,
         progress=False
     )
     assert db.n_filled == 27
@@ -370,7 +370,7 @@ def test_build_resumes_only_the_missing_points(tmp_path, built):
 
 def test_build_in_two_processes_matches_one(tmp_path, built):
     db = build_knowledge_database(
-        tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant, batch_size=14, workers=2,
+        tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant, batch_size=14, workers=2,
         progress=False
     )
     np.testing.assert_allclose(db.read(np.arange(27)), built.read(np.arange(27)))
@@ -378,14 +378,14 @@ def test_build_in_two_processes_matches_one(tmp_path, built):
 
 def test_build_validates_its_arguments(tmp_path):
     with pytest.raises(ValueError, match='n_trials to be an int >= 1'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant,
+        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant,
                                  n_trials=0)
     with pytest.raises(ValueError, match=r'scale >= 1\.526 Pa per LSB'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant,
+        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant,
                                  scale=1.0)
     KnowledgeDatabase.create(tmp_path / 'k.db', AROUND, steps=10).close()
     with pytest.raises(ValueError, match='to resume'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=SoftArmPlant,
+        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant,
                                  progress=False)
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams, run_trials
-from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+from inflarm_hw.sra_plant import IDEAL, NOISE_FREE, SoftArmPlant, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBERS
 
 START = np.array([0.0, 0.0, 0.604])
@@ -17,8 +17,9 @@ PEA, B1, B2, B3, B4 = range(5)
 
 @pytest.fixture(scope='module')
 def fig7_run():
-    """The Fig 7 / Fig 8 experiment: 30 trials of 30 s, noise-free."""
-    plant = SoftArmPlant(1)
+    """The Fig 7 / Fig 8 experiment: 30 trials of 30 s on the default plant (valves 0.1 s
+    behind their commands), measured exactly (deterministic)."""
+    plant = SoftArmPlant(1, NOISE_FREE)
     controller = PidIlcController(1)
     return run_trials(plant, controller, START, TARGET, n_trials=30, duration_s=30.0)
 
@@ -33,10 +34,21 @@ def test_learning_reaches_the_target_within_5_s_by_trial_10(fig7_run):
     assert np.all(fig7_run.reach_time[29, 0] <= 5.0)
 
 
-def test_rmse_never_increases_over_30_trials(fig7_run):
+def test_rmse_falls_and_never_rises_by_more_than_the_dead_band_wander(fig7_run):
     rmse = fig7_run.rmse[:, 0, :]
+    # with the valve delay the hold hunts within the valves' dead zone and the hysteresis:
+    # measured rises up to 0.017 mm from one trial to the next
+    assert np.all(np.diff(rmse, axis=0) <= 0.05e-3)
+    assert np.all(rmse[-1] < 0.35 * rmse[0])
+
+
+def test_rmse_never_increases_on_the_ideal_plant():
+    # instantaneous valves, exact measurements: the RMSE falls at every trial on every axis
+    r = run_trials(SoftArmPlant(1, IDEAL), PidIlcController(1), START, TARGET, 30, 30.0,
+                   keep_trajectories=False)
+    rmse = r.rmse[:, 0, :]
     assert np.all(np.diff(rmse, axis=0) <= 0.0)
-    assert np.all(rmse[-1] < 0.5 * rmse[0])
+    assert np.all(rmse[-1] < 0.35 * rmse[0])
 
 
 def test_trial_results_shapes_and_units(fig7_run):
@@ -52,7 +64,7 @@ def test_trial_results_shapes_and_units(fig7_run):
 
 
 def test_learning_converges_with_vision_noise():
-    plant = SoftArmPlant(1, SoftArmPlantParams(noise_std=0.5e-3), np.random.default_rng(7))
+    plant = SoftArmPlant(1, SoftArmPlantParams(), np.random.default_rng(7))  # 0.5 mm noise
     r = run_trials(plant, PidIlcController(1), START, TARGET, 10, 20.0, keep_trajectories=False)
     assert r.trajectories is None
     assert np.all(r.rmse[-1, 0] < 0.4 * r.rmse[0, 0])
@@ -61,28 +73,31 @@ def test_learning_converges_with_vision_noise():
 
 def test_trials_as_short_as_the_memory_still_learn_the_hold():
     # the knowledge database learns with 10 s trials; the memory must also hold the target after
-    learned = run_trials(SoftArmPlant(1), PidIlcController(1), START, TARGET, 15, 10.0,
+    # (on the ideal plant: with the valve delay z creeps up to 5.0 mm off at 19 s and back,
+    # right at the reach tolerance; inflarm_control/README.md)
+    learned = run_trials(SoftArmPlant(1, IDEAL), PidIlcController(1), START, TARGET, 15, 10.0,
                          keep_trajectories=False)
-    check = run_trials(SoftArmPlant(1), PidIlcController(1, PidIlcParams(learning=True)),
+    check = run_trials(SoftArmPlant(1, IDEAL), PidIlcController(1, PidIlcParams(learning=True)),
                        START, TARGET, 1, 30.0, memory=learned.memory)
     assert np.all(check.reach_time[0, 0] <= 5.0)
 
 
 def test_batched_tasks_match_single_task_runs():
     targets = np.array([[0.1, 0.11, 0.67], [-0.08, 0.06, 0.72], [0.05, -0.1, 0.8]])
-    batch = run_trials(SoftArmPlant(3), PidIlcController(3), START, targets, 3, 8.0)
+    batch = run_trials(SoftArmPlant(3, NOISE_FREE), PidIlcController(3), START, targets, 3, 8.0)
     for i in range(3):
-        single = run_trials(SoftArmPlant(1), PidIlcController(1), START, targets[i], 3, 8.0)
+        single = run_trials(SoftArmPlant(1, NOISE_FREE), PidIlcController(1), START,
+                            targets[i], 3, 8.0)
         np.testing.assert_allclose(batch.trajectories[:, :, i], single.trajectories[:, :, 0],
                                    rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(batch.memory[i], single.memory[0], rtol=1e-12)
 
 
 def test_memory_from_run_trials_continues_learning():
-    first = run_trials(SoftArmPlant(1), PidIlcController(1), START, TARGET, 4, 20.0)
-    resumed = run_trials(SoftArmPlant(1), PidIlcController(1), START, TARGET, 2, 20.0,
+    first = run_trials(SoftArmPlant(1, NOISE_FREE), PidIlcController(1), START, TARGET, 4, 20.0)
+    resumed = run_trials(SoftArmPlant(1, NOISE_FREE), PidIlcController(1), START, TARGET, 2, 20.0,
                          memory=first.memory)
-    whole = run_trials(SoftArmPlant(1), PidIlcController(1), START, TARGET, 6, 20.0)
+    whole = run_trials(SoftArmPlant(1, NOISE_FREE), PidIlcController(1), START, TARGET, 6, 20.0)
     np.testing.assert_allclose(resumed.rmse, whole.rmse[4:], rtol=1e-12)
 
 
@@ -171,7 +186,7 @@ def test_learning_off_ignores_the_memory():
 def test_finish_trial_returns_a_bounded_memory():
     c = PidIlcController(1)
     c.start_trial(START, TARGET)
-    plant = SoftArmPlant(1)
+    plant = SoftArmPlant(1, NOISE_FREE)
     for _ in range(60):
         plant.step(c.step(plant.measure(), 0.2), 0.2)
     memory = c.finish_trial()
@@ -207,7 +222,7 @@ def test_single_task_path_matches_the_batched_path_with_dropouts():
     memory = None
     for _ in range(3):
         single, batch = PidIlcController(1), PidIlcController(2)
-        plants = SoftArmPlant(1), SoftArmPlant(2)
+        plants = SoftArmPlant(1, NOISE_FREE), SoftArmPlant(2, NOISE_FREE)
         single.start_trial(START, TARGET, memory)
         batch.start_trial(START, TARGET, None if memory is None else memory[0])
         for ok in valid:
@@ -300,6 +315,41 @@ def test_reach_time_is_when_the_axis_stays_within_tolerance():
     samples[:, 1] += [0.1, 0.0, 0, 0, 0, 0, 0, 0, 0, 0, 0.02]  # outside at the end
     r = run_trials(_ScriptedPlant(samples), PidIlcController(1), START, TARGET, 1, 2.0)
     np.testing.assert_allclose(r.reach_time[0, 0], [0.8, np.inf, 0.0])
+
+
+class _BlinkingPlant:
+    """The simulated arm, measured exactly except every fifth sample, which is lost (NaN)."""
+
+    def __init__(self):
+        self.plant = SoftArmPlant(1, NOISE_FREE)
+        self.n = 1
+        self.k = 0
+
+    @property
+    def chamber_pressures(self):
+        return self.plant.chamber_pressures
+
+    def reset(self, end_point=None):
+        self.plant.reset(end_point=end_point)
+
+    def step(self, command, dt):
+        self.plant.step(command, dt)
+
+    def measure(self):
+        self.k += 1
+        return np.full((1, 3), np.nan) if self.k % 5 == 0 else self.plant.measure()
+
+
+def test_run_trials_takes_nan_measurements_as_dropouts():
+    r = run_trials(_BlinkingPlant(), PidIlcController(1), START, TARGET, 10, 20.0)
+    lost = np.isnan(r.trajectories[:, :, 0, 0])
+    assert lost.sum() == 10 * 101 // 5
+    assert np.all(np.isfinite(r.rmse)) and np.all(r.reach_time[-1, 0] <= 5.0)
+    # the RMSE is that of the measured samples
+    error = np.where(lost[..., None], 0.0, r.trajectories[:, :, 0] - TARGET)
+    np.testing.assert_allclose(
+        r.rmse[:, 0], np.sqrt((error ** 2).sum(axis=1) / (~lost).sum(axis=1)[:, None]))
+    assert np.all(r.rmse[-1, 0] < 0.35 * r.rmse[0, 0])
 
 
 def test_core_imports_without_rclpy():

@@ -66,6 +66,8 @@ def test_defaults_and_read_only_gains(executor):
     node = rig.controller
     assert node.get_parameter('rate_hz').value == 5.0
     assert node.get_parameter('quadrant_bellows').value == ['B4,B3', 'B2,B3', 'B2,B1', 'B4,B1']
+    assert node.get_parameter('bellows_preload_pa').value == 6000.0
+    assert node.get_parameter('path.speed_mps').value == 0.005
     assert not node.set_parameters([Parameter('gains.kp', value=[1.0, 1.0, 1.0])])[0].successful
     assert not node.set_parameters([Parameter('trial_duration_s', value=0.0)])[0].successful
 
@@ -161,16 +163,16 @@ def test_vent_ends_the_trial_and_holds_zero_pressure(executor):
     assert all(set(c.as_dict().values()) == {0.0} for c in rig.commands[count:])
 
 
-def test_a_planned_path_is_followed_waypoint_by_waypoint(executor):
+def test_a_planned_path_is_followed_at_the_arms_pace_with_preloaded_bellows(executor):
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Path
 
     from inflarm_msgs_json.ros.qos import LATCHED_QOS
 
-    rig = Rig(executor, path_tolerance_m=0.01)
+    rig = Rig(executor, **{'path.speed_mps': 0.05})
     path_pub = rig.probe.create_publisher(Path, 'planned_path', LATCHED_QOS)
     waypoints = [(0.02, 0.02, 0.62), (0.05, 0.05, 0.64), TARGET]
-    rig.ball(START)
+    rig.ball(waypoints[0])
     assert spin_until(executor, lambda: rig.controller.position is not None)
     path = Path()
     path.header.frame_id = 'sra_mount'
@@ -179,16 +181,23 @@ def test_a_planned_path_is_followed_waypoint_by_waypoint(executor):
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = point
         path.poses.append(pose)
     path_pub.publish(path)
-    assert spin_until(executor, lambda: rig.controller.trial_active)
-    for reached, following in zip(waypoints[:-1], waypoints[1:], strict=True):
-        np.testing.assert_allclose(rig.controller.controller.target[0], reached)
+    assert spin_until(executor, lambda: rig.controller.following)
+    follower = rig.controller.follower
+    np.testing.assert_allclose(follower.goal, TARGET)
+    rig.ball((0.02, 0.02, 0.66))  # 40 mm off the reference: it waits
+    rig.spin(0.6)
+    assert follower.progress < 0.01
 
-        def ball_arrives(point=reached, following=following):
-            rig.ball(point)  # the camera sees the ball at the waypoint...
-            return np.allclose(rig.controller.controller.target[0], following)  # ...next one
-        assert spin_until(executor, ball_arrives, timeout_s=5.0)
-    assert rig.controller.waypoints == []
-    np.testing.assert_allclose(rig.controller.controller.target[0], TARGET)
+    def ball_follows():
+        rig.ball(follower.reference)  # the camera sees the ball where it is asked to be
+        return follower.at_end
+    assert spin_until(executor, ball_follows, timeout_s=10.0)
+    assert rig.commands and all(
+        min(c.as_dict()[b] for b in ('B1', 'B2', 'B3', 'B4')) >= 6000.0
+        for c in rig.commands)
+    rig.task(TARGET)  # a task ends the path
+    assert spin_until(executor, lambda: rig.controller.trial_active)
+    assert not rig.controller.following
 
 
 def test_a_path_outside_the_workspace_is_rejected(executor):

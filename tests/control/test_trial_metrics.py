@@ -39,6 +39,21 @@ def test_batched_tasks_are_independent():
     np.testing.assert_allclose(metrics.rmse[1], np.sqrt(0.5))
 
 
+def test_samples_without_a_measurement_count_for_nothing():
+    metrics = TrialMetrics([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], tolerance=0.1)
+    metrics.add([[0.3, 0.0, 0.0], [np.nan, np.nan, np.nan]], 0.0, valid=[True, False])
+    metrics.add([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], 1.0)
+    metrics.add([[np.nan, 0.0, 0.0], [1.0, 1.0, 1.0]], 2.0, valid=[False, True])
+    assert metrics.samples == 3
+    np.testing.assert_allclose(metrics.rmse[0], [np.sqrt(0.09 / 2), 0.0, 0.0])
+    np.testing.assert_allclose(metrics.rmse[1], 0.0)  # two measured samples, both on target
+    assert metrics.reach_time.tolist() == [[1.0, 0.0, 0.0], [1.0] * 3]
+    with pytest.raises(ValueError, match=r'valid of shape \(2,\)'):
+        metrics.add([[0.0] * 3, [1.0] * 3], 3.0, valid=[True])
+    with pytest.raises(ValueError, match='finite end_point'):
+        metrics.add([[np.nan, 0.0, 0.0], [1.0] * 3], 3.0, valid=[True, True])
+
+
 @pytest.mark.parametrize('target, tolerance, match', [
     ([0.0, 0.0], 0.01, 'target of shape'),
     ([0.0, np.nan, 0.0], 0.01, 'finite target'),

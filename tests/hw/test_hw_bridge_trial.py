@@ -24,8 +24,10 @@ SYSTEMS = ('direct', 'bridged')
 def test_a_pid_trial_through_the_bridge_matches_the_simulator(
         node_processes, executor, tmp_path, capsys):
     link = str(tmp_path / 'mcu')
-    plants = {'direct': [('sra_sim', {'seed': 7})],
-              'bridged': [('sim_mcu', {'plant': 'sra', 'link': link, 'seed': 7}),
+    # the simulators' stand-in ball_position, not the camera: the comparison is of the plants
+    measured = {'seed': 7, 'publish_ball_position': True}
+    plants = {'direct': [('sra_sim', measured)],
+              'bridged': [('sim_mcu', {'plant': 'sra', 'link': link, **measured}),
                           ('hw_bridge', {'port': link, 'autostart': True})]}
     probe = rclpy.create_node('probe', context=executor.context)
     truth = {name: [] for name in SYSTEMS}

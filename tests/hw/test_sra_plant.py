@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+from inflarm_hw.sra_plant import IDEAL, NOISE_FREE, SoftArmPlant, SoftArmPlantParams
 from inflarm_hw.valve import ITV2050, pressure_to_voltage
 from inflarm_model.soft_arm import CHAMBERS, quadrant_of
 
@@ -180,6 +180,53 @@ def test_result_does_not_depend_on_the_step_size():
     np.testing.assert_allclose(coarse.chamber_pressures, fine.chamber_pressures, rtol=1e-12)
 
 
+def test_valves_deliver_a_command_valve_delay_after_it():
+    plant = SoftArmPlant(1, NOISE_FREE)
+    assert plant.params.valve_delay == 0.1  # the documented default
+    command = _command(PEA=20, B3=30)
+    outputs, pressures = [], []
+    for _ in range(10):  # t = 0.02 ... 0.2 s
+        plant.step(command, 0.02)
+        outputs.append(plant.valve_outputs[0])
+        pressures.append(plant.chamber_pressures[0])
+    np.testing.assert_array_equal(outputs[3], 0.0)  # t = 0.08 s
+    np.testing.assert_array_equal(pressures[4], 0.0)  # t = 0.1 s: nothing has flowed yet
+    np.testing.assert_allclose(outputs[5], command)  # t = 0.12 s
+    assert pressures[5][PEA] > 0.0 and pressures[5][B3] > 0.0
+
+
+def test_commands_in_flight_arrive_in_order():
+    plant = SoftArmPlant(1, NOISE_FREE)
+    first, second = _command(B4=10), _command(B4=30)
+    plant.step(first, 0.05)
+    plant.step(second, 0.05)
+    plant.step(second, 0.05)  # t = 0.15 s: the first command left the valves at 0.1 s
+    np.testing.assert_allclose(plant.valve_outputs[0], first)
+    plant.step(second, 0.05)
+    np.testing.assert_allclose(plant.valve_outputs[0], second)
+
+
+def test_a_step_longer_than_the_delay_is_the_ideal_response_shifted_by_it():
+    delayed, ideal = SoftArmPlant(1, NOISE_FREE), SoftArmPlant(1, IDEAL)
+    command = _command(PEA=15, B2=25, B3=10)
+    delayed.step(command, 0.2)
+    delayed.step(command, 0.2)
+    ideal.step(np.zeros(5), 0.1)
+    ideal.step(command, 0.3)
+    np.testing.assert_allclose(delayed.end_point, ideal.end_point, rtol=1e-12)
+    np.testing.assert_allclose(delayed.chamber_pressures, ideal.chamber_pressures, rtol=1e-12)
+
+
+def test_reset_to_a_point_has_the_valves_holding_it():
+    plant = SoftArmPlant(1, NOISE_FREE)
+    target = np.array([0.1, 0.11, 0.67])
+    plant.reset(end_point=target)
+    hold = plant.holding_pressures(target)[0]
+    np.testing.assert_allclose(plant.valve_outputs[0], hold)
+    _hold(plant, hold, 2.0, dt=0.02)  # no dip while the first command is in flight
+    np.testing.assert_allclose(plant.end_point[0], target, atol=1e-9)
+
+
 def test_long_steps_stay_stable():
     plant = SoftArmPlant()
     for _ in range(20):
@@ -211,12 +258,14 @@ def test_arms_are_independent_and_match_single_arm_runs():
         np.testing.assert_allclose(batch.end_point[i], single.end_point[0], rtol=1e-12)
 
 
-def test_measurement_noise_has_the_configured_spread():
-    plant = SoftArmPlant(4000, SoftArmPlantParams(noise_std=0.5e-3), np.random.default_rng(7))
+def test_measurement_noise_is_on_by_default_with_the_configured_spread():
+    plant = SoftArmPlant(4000, rng=np.random.default_rng(7))
+    assert plant.params.noise_std == 0.5e-3  # the documented default
     error = plant.measure() - plant.end_point
     np.testing.assert_allclose(error.std(axis=0), 0.5e-3, rtol=0.05)
     np.testing.assert_allclose(error.mean(axis=0), 0.0, atol=3e-5)
-    np.testing.assert_array_equal(SoftArmPlant(2).measure(), SoftArmPlant(2).end_point)
+    exact = SoftArmPlant(2, NOISE_FREE)
+    np.testing.assert_array_equal(exact.measure(), exact.end_point)
 
 
 @pytest.mark.parametrize(('call', 'message'), [
@@ -255,6 +304,8 @@ def test_bad_construction_is_rejected():
         SoftArmPlantParams(pea_time_constant=0.0)
     with pytest.raises(ValueError, match='finite extension_play'):
         SoftArmPlantParams(extension_play=np.nan)
+    with pytest.raises(ValueError, match='valve_delay >= 0'):
+        SoftArmPlantParams(valve_delay=-0.1)
 
 
 def test_core_imports_without_rclpy():

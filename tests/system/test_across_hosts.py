@@ -41,6 +41,8 @@ from topic_probe import TopicProbe, probe_command, read_records
 TARGET = np.array([0.100, 0.110, 0.670])  # Fig 7 of 001_..., the trial_runner's default [m]
 TRIAL_DURATION_S = 15.0
 PRESSURE_TOLERANCE_PA = 1000.0  # measured vs commanded, once the command is held
+# the simulator's stand-in ball_position (no camera and tracker across the link)
+SRA_SIM = {'seed': 7, 'publish_ball_position': True}
 
 
 def create_hosts_or_skip(**kwargs):
@@ -83,7 +85,7 @@ def test_a_pid_trial_runs_across_two_hosts(hosts, node_processes, tmp_path):
         return f'{what}; output:\n{node_processes.output()}'
 
     start(node_processes, host_a, 'sra_sim',
-          NodeProcess('inflarm_hw', 'sra_sim', {'seed': 7}).command())
+          NodeProcess('inflarm_hw', 'sra_sim', SRA_SIM).command())
     start(node_processes, host_b, 'probe', probe_command(
         probe_file, string_topics=['chamber_pressures', 'chamber_pressure_command',
                                    'trial_report'],
@@ -159,7 +161,7 @@ def test_the_static_peer_alone_is_enough_to_discover_the_other_host(hosts, node_
     host_a, host_b = hosts
     probe_file = tmp_path / 'host_b.jsonl'
     start(node_processes, host_a, 'sra_sim',
-          NodeProcess('inflarm_hw', 'sra_sim', {'seed': 7}).command(), 'LOCALHOST')
+          NodeProcess('inflarm_hw', 'sra_sim', SRA_SIM).command(), 'LOCALHOST')
     start(node_processes, host_b, 'probe', probe_command(
         probe_file, string_topics=['chamber_pressures'], point_topics=['ball_position']),
         'LOCALHOST')

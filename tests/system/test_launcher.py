@@ -6,7 +6,9 @@ import sys
 
 import pytest
 
-from inflarm_bringup.processes import NodeProcess, ProcessGroup
+from inflarm_bringup import launcher
+from inflarm_bringup.processes import NodeProcess, ProcessGroup, is_installed
+from inflarm_bringup.systems import VISUALIZATION_PACKAGES
 from ros_harness import wait_until
 
 pytestmark = pytest.mark.system
@@ -55,3 +57,21 @@ def test_overrides_win_over_every_parameter_file_in_any_namespace(namespace):
         probe.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+def test_rviz_without_a_jazzy_install_is_refused_naming_what_is_missing(capsys):
+    missing = [p for p in VISUALIZATION_PACKAGES if not is_installed(p)]
+    if not missing:
+        pytest.skip('robot_state_publisher, tf2_ros and rviz2 are installed here')
+    with pytest.raises(SystemExit) as exited:
+        launcher.main(['sim', '--rviz', '--duration', '1'])
+    assert exited.value.code == 2
+    assert f'--rviz needs {", ".join(missing)} from a ROS 2 Jazzy install' in (
+        capsys.readouterr().err)
+
+
+def test_rviz_is_refused_in_process(capsys):
+    with pytest.raises(SystemExit) as exited:
+        launcher.main(['sim', '--rviz', '--in-process'])
+    assert exited.value.code == 2
+    assert 'not with --in-process' in capsys.readouterr().err

@@ -16,7 +16,9 @@ TARGET = np.array([0.100, 0.110, 0.670])
 
 
 def test_pid_drives_the_simulated_arm_to_the_target(node_processes, executor):
-    node_processes.start('inflarm_hw', 'sra_sim', parameters={'seed': 7})
+    # the simulator's stand-in ball_position (the camera path has its own test)
+    node_processes.start('inflarm_hw', 'sra_sim',
+                         parameters={'seed': 7, 'publish_ball_position': True})
     node_processes.start('inflarm_control', 'pressure_controller',
                          parameters={'trial_duration_s': 25.0})
     probe = rclpy.create_node('probe', context=executor.context)

@@ -5,22 +5,30 @@ takes the latest ball position, runs the three axis controllers and publishes th
 pressures. After ``trial_duration_s`` the trial's outputs become the ILC memory of that target
 (seeding the next ``pid_ilc`` trial to it), a TrialReport is published, and the last pressures
 are held. Without a memory, a ``pid_ilc`` task is seeded from the experiential knowledge database
-(when one is configured). A planned path is followed waypoint by waypoint with PID (section 4.2):
-each waypoint's trial starts from the held pressures or, with a knowledge database, from them
-plus the change of the holding pressures from where the end is to the waypoint (interpolated
-between knowledge points, ``knowledge.holding_pressure``): a feedforward that carries the end
-there at the valves' pace while PID trims, and in which a bias of the database cancels.
+(when one is configured). With ``bellows_preload_pa`` > 0 (the default) every bellows pair is
+driven antagonistically around that pressure (``pid_ilc`` module docstring); 0 is the paper's
+quadrant rule.
+
+A planned path (section 4.2) is followed by `inflarm_control.path_following.PathFollower`: a
+reference moving along it at up to ``path.speed_mps`` that waits for the arm (it slows down
+from ``path.slow_error_m`` and stops at ``path.stop_error_m`` of error), the knowledge
+database's holding pressures at the waypoints as feedforward (``knowledge.holding_pressure``;
+PI alone without a database or where it has no knowledge), and a PI per axis (``path.kp``,
+``path.ki``) from the pressures held when the path arrives (no jump). After its end the path's
+last waypoint is held, under control, until the next task, path, ``~/stop`` or ``~/vent``.
 
 Subscribes:
     ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m]; a point
         outside the work space grown by ``workspace_margin_m`` is a bad measurement, rejected
         (it reaches neither a report nor the ILC memory).
     control_task (std_msgs/String: ControlTask JSON, RELIABLE_QOS): start a trial.
-    planned_path (nav_msgs/Path, LATCHED_QOS): follow these waypoints (at most
-        ``max_waypoints``, each in the work space), then hold the last.
+    planned_path (nav_msgs/Path, LATCHED_QOS): follow this path (at most ``max_waypoints``
+        waypoints, each in the work space; pose stamps are not used: the arm sets the pace),
+        then hold its last waypoint.
 Publishes:
     chamber_pressure_command (std_msgs/String: PressureCommand JSON, COMMAND_QOS) [Pa].
-    trial_report (std_msgs/String: TrialReport JSON, RELIABLE_QOS): per-axis RMSE, reach time.
+    trial_report (std_msgs/String: TrialReport JSON, RELIABLE_QOS): per-axis RMSE, reach time
+        (of trials; a path has none).
 Services (std_srvs/Trigger):
     ~/start_trial: repeat the last task as the next trial.
     ~/stop: end the current trial without learning; the last pressures are held.
@@ -28,9 +36,11 @@ Services (std_srvs/Trigger):
         arm returns to rest, where the paper's trials start (eq. 3: outputs start at 0 kPa).
     ~/reset_learning: forget every ILC memory (and the memory file).
 Parameters:
-    rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, learning.*, quadrant_bellows
-        (read-only),
-    trial_duration_s, measurement_timeout_s, reach_tolerance_m, path_tolerance_m,
+    rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, learning.*, quadrant_bellows,
+        bellows_preload_pa (read-only),
+    path.kp, path.ki (read-only), path.speed_mps, path.slow_error_m, path.stop_error_m,
+        path.feedforward_lead_s (read-only),
+    trial_duration_s, measurement_timeout_s, reach_tolerance_m,
     workspace_margin_m, max_waypoints, ilc_memory_path, knowledge_db_path (read-only),
     frame_id (read-only).
 Times (trial steps, measurement freshness) are on the node clock, so that a replay under
@@ -48,6 +58,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from inflarm_control.knowledge import KnowledgeDatabase, holding_pressure, seed_memory
+from inflarm_control.path_following import PathFollower, PathFollowingParams
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams
 from inflarm_control.trial_metrics import TrialMetrics
 from inflarm_model.soft_arm import CHAMBERS, Workspace, check_in_workspace
@@ -66,6 +77,7 @@ from inflarm_msgs_json.ros.qos import (
 from inflarm_msgs_json.ros.spin import spin_node
 
 _DEFAULTS = PidIlcParams()
+_PATH_DEFAULTS = PathFollowingParams()
 PARAMETERS = (
     Parameter('rate_hz', _DEFAULTS.rate_hz, 'control rate [Hz] (paper: about 5 Hz)',
               range=(0.5, 100.0), read_only=True),
@@ -91,14 +103,31 @@ PARAMETERS = (
     Parameter('quadrant_bellows', [','.join(pair) for pair in _DEFAULTS.quadrant_bellows],
               "bellows driving x,y in quadrants 1-4 (Fig 4: 'B4,B3', 'B2,B3', 'B2,B1', 'B4,B1')",
               read_only=True),
+    Parameter('bellows_preload_pa', _PATH_DEFAULTS.bellows_preload,
+              "common pressure of each bellows pair, driven antagonistically; 0: the paper's "
+              'quadrant rule [Pa]', range=(0.0, 50e3), read_only=True),
+    Parameter('path.kp', list(_PATH_DEFAULTS.kp), 'path following: proportional gain per axis '
+              '[Pa/m]', read_only=True),
+    Parameter('path.ki', list(_PATH_DEFAULTS.ki), 'path following: integral gain per axis '
+              '[Pa/(m s)]', read_only=True),
+    Parameter('path.speed_mps', _PATH_DEFAULTS.speed,
+              'top speed of the reference along a path [m/s]', range=(1e-4, 0.1),
+              read_only=True),
+    Parameter('path.slow_error_m', _PATH_DEFAULTS.slow_error,
+              'the reference slows down beyond this distance from the end [m]',
+              range=(0.0, 0.1), read_only=True),
+    Parameter('path.stop_error_m', _PATH_DEFAULTS.stop_error,
+              'the reference waits at this distance from the end (> path.slow_error_m) [m]',
+              range=(1e-4, 0.2), read_only=True),
+    Parameter('path.feedforward_lead_s', _PATH_DEFAULTS.feedforward_lead,
+              'the feedforward is taken this far ahead of the reference [s]',
+              range=(0.0, 10.0), read_only=True),
     Parameter('trial_duration_s', 20.0, 'length of a trial [s]', range=(1.0, 600.0)),
     Parameter('measurement_timeout_s', 0.5,
               'a ball position older than this is a vision dropout: hold, do not learn [s]',
               range=(0.05, 10.0)),
     Parameter('reach_tolerance_m', 0.005, 'per-axis tolerance for the reach time [m]',
               range=(1e-4, 0.1)),
-    Parameter('path_tolerance_m', 0.01, 'distance at which a path waypoint counts as reached [m]',
-              range=(1e-3, 0.2)),
     Parameter('workspace_margin_m', 0.05,
               'ball positions farther than this outside the work space are rejected [m]',
               range=(0.0, 0.5), read_only=True),
@@ -110,6 +139,15 @@ PARAMETERS = (
               'tasks; empty: none', read_only=True),
     Parameter('frame_id', 'sra_mount', 'frame of targets and measurements', read_only=True),
 )
+
+
+def path_following_params(p: dict, core: PidIlcParams) -> PathFollowingParams:
+    """The path follower's parameters from the node's (``path.*``) and the trials' limits."""
+    return PathFollowingParams(
+        kp=tuple(p['path.kp']), ki=tuple(p['path.ki']),
+        bellows_preload=p['bellows_preload_pa'], p_max=core.p_max, speed=p['path.speed_mps'],
+        slow_error=p['path.slow_error_m'], stop_error=p['path.stop_error_m'],
+        feedforward_lead=p['path.feedforward_lead_s'], workspace=core.workspace)
 
 
 def task_key(target: np.ndarray) -> tuple[int, int, int]:
@@ -138,8 +176,10 @@ class PressureController(GuardedCallbacks, Node):
             learning_filter_steps=p['learning.filter_steps'],
             learning_dead_band=p['learning.dead_band_m'],
             learning_feedback_gain=tuple(p['learning.feedback_gain']),
-            quadrant_bellows=tuple(tuple(q.split(',')) for q in p['quadrant_bellows']))
+            quadrant_bellows=tuple(tuple(q.split(',')) for q in p['quadrant_bellows']),
+            bellows_preload=p['bellows_preload_pa'])
         self.controller = PidIlcController(n=1, params=self.core_params)
+        self.follower = PathFollower(path_following_params(p, self.core_params))
         self.dt = 1.0 / p['rate_hz']
         self.memories = self.load_memories(p['ilc_memory_path'])
         self.knowledge = (KnowledgeDatabase.open(p['knowledge_db_path'])
@@ -152,7 +192,7 @@ class PressureController(GuardedCallbacks, Node):
         self.trial_active = False
         self.trial_steps = 0
         self.metrics: TrialMetrics | None = None
-        self.waypoints: list[np.ndarray] = []
+        self.following = False  # a path is being followed (or its end held)
         self.command: np.ndarray | None = None  # last published set pressures, held when idle
 
         self.create_guarded_subscription(
@@ -195,7 +235,7 @@ class PressureController(GuardedCallbacks, Node):
     def on_control_task(self, msg: String) -> None:
         task = from_string_msg(msg, expected=ControlTask)
         self.check_frame(task.frame_id)
-        self.waypoints = []
+        self.following = False
         self.start_task(task)
 
     def on_planned_path(self, msg: Path) -> None:
@@ -206,31 +246,28 @@ class PressureController(GuardedCallbacks, Node):
         waypoints = np.array([[ps.pose.position.x, ps.pose.position.y, ps.pose.position.z]
                               for ps in msg.poses])
         check_in_workspace(waypoints, self.core_params.workspace, 'waypoint')
-        self.get_logger().info(f'following a path of {len(waypoints)} waypoints')
-        self.waypoints = list(waypoints[1:])
-        self.start_waypoint(waypoints[0])
-
-    def start_waypoint(self, target: np.ndarray) -> bool:
-        """Start the trial to a path's next waypoint (see the module docstring)."""
-        initial = None
-        if self.knowledge is not None and self.command is not None:
+        if self.position is None:
+            raise InputError('path', 'path rejected: no ball_position received yet')
+        feedforward, source = None, 'PI alone'
+        if self.knowledge is not None:
             try:
-                change = (holding_pressure(self.knowledge, target)
-                          - holding_pressure(self.knowledge, self.position))
-                initial = np.clip(self.command + change, 0.0, self.core_params.p_max)
+                feedforward = np.array([holding_pressure(self.knowledge, w) for w in waypoints])
+                source = 'knowledge database feedforward'
             except (KeyError, ValueError) as err:
-                self.problems.warn('path', f'no knowledge for waypoint {target.tolist()}: '
-                                           f'{err}', kind='no knowledge')
-        return self.start_task(ControlTask(frame_id=self.params['frame_id'],
-                                           target=tuple(target), mode='pid', trial_id=0),
-                               initial_output=initial, log=False)
+                self.problems.warn('path', f'no knowledge along the path ({err}): PI alone',
+                                   kind='no knowledge')
+        held = np.zeros(len(CHAMBERS)) if self.command is None else self.command
+        self.abort_trial()
+        self.follower.start(waypoints, self.position, held, feedforward)
+        self.following = True
+        self.get_logger().info(f'following a path of {len(waypoints)} waypoints, '
+                               f'{self.follower.length:.3f} m ({source})')
 
     # -- trials --------------------------------------------------------------------------------
 
-    def start_task(self, task: ControlTask, restart_metrics: bool = True,
-                   initial_output: np.ndarray | None = None, log: bool = True) -> bool:
-        """Start a trial of ``task`` from the current position, its outputs starting at
-        ``initial_output`` (default: the held pressures); False (logged) if it can't."""
+    def start_task(self, task: ControlTask) -> bool:
+        """Start a trial of ``task`` from the current position, its outputs starting at the
+        held pressures; False (logged) if it can't."""
         if self.position is None:
             self.get_logger().error(
                 f'task to {list(task.target)} rejected: no ball_position received yet')
@@ -244,8 +281,7 @@ class PressureController(GuardedCallbacks, Node):
                 memory, source = seed_memory(self.knowledge, target), 'knowledge database'
             except (KeyError, ValueError) as err:
                 self.get_logger().warning(f'no knowledge for this task: {err}')
-        if initial_output is None:
-            initial_output = np.zeros(len(CHAMBERS)) if self.command is None else self.command
+        initial_output = np.zeros(len(CHAMBERS)) if self.command is None else self.command
         try:
             self.controller.start_trial(self.position, target, memory,
                                         initial_output=initial_output)
@@ -255,24 +291,20 @@ class PressureController(GuardedCallbacks, Node):
         self.task = task
         self.trial_active = True
         self.trial_steps = 0
-        if restart_metrics:
-            self.metrics = TrialMetrics(target, self.params['reach_tolerance_m'])
-        if log:
-            self.get_logger().info(f'trial {task.trial_id} ({task.mode}, {source}) to '
-                                   f'{np.round(target, 4).tolist()}')
+        self.metrics = TrialMetrics(target, self.params['reach_tolerance_m'])
+        self.get_logger().info(f'trial {task.trial_id} ({task.mode}, {source}) to '
+                               f'{np.round(target, 4).tolist()}')
         return True
 
     def step(self) -> None:
+        if self.following:
+            self.step_path()
+            return
         if not self.trial_active:
             if self.command is not None:
                 self.publish_command(self.command)  # hold: the MCU vents a silent controller
             return
-        fresh = (self.position_time_ns is not None
-                 and (self.get_clock().now().nanoseconds - self.position_time_ns) * 1e-9
-                 <= self.params['measurement_timeout_s'])
-        if not fresh:
-            self.problems.warn('step', 'no fresh ball_position: holding the pressures, '
-                                       'not learning', kind='stale')
+        fresh = self.fresh_position()
         position = self.position if fresh else np.full(3, np.nan)
         command = self.controller.step(position[None, :], self.dt, valid=[fresh])[0]
         self.publish_command(command)
@@ -280,15 +312,25 @@ class PressureController(GuardedCallbacks, Node):
         elapsed = self.trial_steps * self.dt
         if fresh:
             self.metrics.add(self.position, elapsed)
-        if self.waypoints and fresh and np.linalg.norm(
-                self.position - self.controller.target[0]) <= self.params['path_tolerance_m']:
-            next_target = self.waypoints.pop(0)
-            self.controller.finish_trial()
-            self.start_waypoint(next_target)
-            if not self.waypoints:
-                self.get_logger().info('path followed to its last waypoint; holding it')
-        elif not self.waypoints and elapsed >= self.params['trial_duration_s']:
+        if elapsed >= self.params['trial_duration_s']:
             self.finish_trial()
+
+    def fresh_position(self) -> bool:
+        """Whether the latest ball position is recent enough to act on (warns if not)."""
+        fresh = (self.position_time_ns is not None
+                 and (self.get_clock().now().nanoseconds - self.position_time_ns) * 1e-9
+                 <= self.params['measurement_timeout_s'])
+        if not fresh:
+            self.problems.warn('step', 'no fresh ball_position: holding the pressures, '
+                                       'not learning', kind='stale')
+        return fresh
+
+    def step_path(self) -> None:
+        was_at_end = self.follower.at_end
+        fresh = self.fresh_position()
+        self.publish_command(self.follower.step(self.position, self.dt, valid=fresh))
+        if self.follower.at_end and not was_at_end:
+            self.get_logger().info('path followed to its end; holding its last waypoint')
 
     def finish_trial(self) -> None:
         memory = self.controller.finish_trial()[0]
@@ -317,7 +359,7 @@ class PressureController(GuardedCallbacks, Node):
             return response
         task = ControlTask(frame_id=self.task.frame_id, target=self.task.target,
                            mode=self.task.mode, trial_id=self.task.trial_id + 1)
-        self.waypoints = []
+        self.following = False
         response.success = self.start_task(task)
         response.message = f'trial {task.trial_id} started' if response.success else 'rejected'
         return response
@@ -326,7 +368,7 @@ class PressureController(GuardedCallbacks, Node):
         if self.trial_active:
             self.controller.finish_trial()  # discarded: an aborted trial teaches nothing
             self.trial_active = False
-        self.waypoints = []
+        self.following = False
 
     def on_stop(self, request, response):
         self.abort_trial()

@@ -1,4 +1,5 @@
-"""The simulated external camera a simulator node carries (not an executable).
+"""The simulated external camera a simulator node (``sra_sim``, ``sim_mcu``) carries (not an
+executable).
 
 `CameraPublisher` renders the yellow ball at a point the node supplies through
 `inflarm_hw.synthetic_camera` and publishes, on the node:
@@ -12,7 +13,8 @@
 Frames are captured at the node's ``camera_rate_hz`` and only while ``camera/image_raw`` has a
 subscriber (rendering costs about 10-20 ms a frame at 640x480).
 
-Parameters (`CAMERA_PARAMETERS`, declared by the node with its own):
+Parameters (`CAMERA_PARAMETERS`, declared by the node with its own; the defaults are those of
+`inflarm_hw.synthetic_camera.SraCamera`, which tools without ROS render with):
     camera.enabled (bool, read-only): publish images at all.
     camera.width, camera.height (int, read-only): image size [px].
     camera.focal_px (double, read-only): focal length, square pixels, principal point at the
@@ -38,51 +40,56 @@ import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
-from inflarm_hw.synthetic_camera import Scene, SyntheticCamera
-from inflarm_model.camera import PinholeCamera, RigidTransform
+from inflarm_hw.synthetic_camera import SraCamera, SyntheticCamera
 from inflarm_msgs_json.ros.image import numpy_to_image
 from inflarm_msgs_json.ros.parameters import Parameter
 from inflarm_msgs_json.ros.qos import SENSOR_QOS
 
+_C = SraCamera()
 CAMERA_PARAMETERS = (
     Parameter('camera.enabled', True, 'publish simulated camera images', read_only=True),
-    Parameter('camera.width', 640, 'image width [px]', range=(16, 4096), read_only=True),
-    Parameter('camera.height', 480, 'image height [px]', range=(16, 4096), read_only=True),
-    Parameter('camera.focal_px', 900.0, 'focal length [px]', range=(10.0, 20000.0),
+    Parameter('camera.width', _C.width, 'image width [px]', range=(16, 4096), read_only=True),
+    Parameter('camera.height', _C.height, 'image height [px]', range=(16, 4096),
               read_only=True),
-    Parameter('camera.distortion', [-0.12, 0.05, 0.0, 0.0, 0.0],
+    Parameter('camera.focal_px', _C.focal_px, 'focal length [px]', range=(10.0, 20000.0),
+              read_only=True),
+    Parameter('camera.distortion', list(_C.distortion),
               'plumb_bob distortion k1, k2, p1, p2, k3', read_only=True),
-    Parameter('camera.translation_m', [0.0, -1.1, 0.78],
+    Parameter('camera.translation_m', list(_C.translation_m),
               'camera origin in sra_mount [m]', read_only=True),
-    Parameter('camera.rotation_xyzw', [0.0, 0.70710678, 0.70710678, 0.0],
+    Parameter('camera.rotation_xyzw', list(_C.rotation_xyzw),
               'camera -> sra_mount rotation, quaternion x, y, z, w', read_only=True),
-    Parameter('camera.ball_diameter_m', 0.04, 'diameter of the yellow ball [m]',
+    Parameter('camera.ball_diameter_m', _C.ball_diameter_m, 'diameter of the yellow ball [m]',
               range=(0.001, 0.5), read_only=True),
-    Parameter('camera.background', 'noise', 'background: plain, noise or clutter',
+    Parameter('camera.background', _C.background, 'background: plain, noise or clutter',
               read_only=True),
-    Parameter('camera.noise_std', 1.5, 'sensor noise [grey levels]', range=(0.0, 50.0),
-              read_only=True),
-    Parameter('camera.blur_sigma_px', 0.5, 'image blur [px]', range=(0.0, 10.0)),
-    Parameter('camera.exposure', 1.0, 'exposure gain', range=(0.05, 10.0)),
-    Parameter('camera.latency_s', 0.03, 'delay from capture to publication [s]',
+    Parameter('camera.noise_std', _C.noise_std, 'sensor noise [grey levels]',
+              range=(0.0, 50.0), read_only=True),
+    Parameter('camera.blur_sigma_px', _C.blur_sigma_px, 'image blur [px]', range=(0.0, 10.0)),
+    Parameter('camera.exposure', _C.exposure, 'exposure gain', range=(0.05, 10.0)),
+    Parameter('camera.latency_s', _C.latency_s, 'delay from capture to publication [s]',
               range=(0.0, 2.0)),
     Parameter('camera.frame_id', 'camera_optical_frame', 'frame of the images',
               read_only=True),
 )
 
 
+def camera_from_parameters(params: dict) -> SraCamera:
+    """The camera set-up the ``camera.*`` parameter values describe."""
+    return SraCamera(
+        width=params['camera.width'], height=params['camera.height'],
+        focal_px=params['camera.focal_px'], distortion=tuple(params['camera.distortion']),
+        translation_m=tuple(params['camera.translation_m']),
+        rotation_xyzw=tuple(params['camera.rotation_xyzw']),
+        ball_diameter_m=params['camera.ball_diameter_m'],
+        background=params['camera.background'], noise_std=params['camera.noise_std'],
+        blur_sigma_px=params['camera.blur_sigma_px'], exposure=params['camera.exposure'],
+        latency_s=params['camera.latency_s'])
+
+
 def synthetic_camera_from_parameters(params: dict, seed: int | None) -> SyntheticCamera:
     """The renderer the ``camera.*`` parameters describe; ``ValueError`` naming a bad one."""
-    camera = PinholeCamera.ideal(params['camera.width'], params['camera.height'],
-                                 params['camera.focal_px'], d=params['camera.distortion'])
-    pose = RigidTransform.from_quaternion(params['camera.translation_m'],
-                                          params['camera.rotation_xyzw'])
-    scene = Scene(background=params['camera.background'],
-                  noise_std=params['camera.noise_std'],
-                  blur_sigma_px=params['camera.blur_sigma_px'],
-                  exposure=params['camera.exposure'])
-    return SyntheticCamera(camera, pose, 0.5 * params['camera.ball_diameter_m'], scene,
-                           seed=seed)
+    return camera_from_parameters(params).renderer(seed)
 
 
 class CameraPublisher:

@@ -6,27 +6,38 @@ in simulation as on hardware. At start it opens a new pty and prints its path on
 ``sim_mcu: serial port /dev/pts/N`` (and makes the symlink ``link`` to it when set); with
 ``device`` set it uses that tty instead (e.g. one end of ``socat -d -d pty,raw,echo=0
 pty,raw,echo=0``). Only what an MCU cannot know goes on ROS topics: the true arm state and the
-camera's view of the soft arm's end (the simulated world's sensors beside the MCU).
+external camera's images of the soft arm's end (the simulated world's sensors beside the MCU;
+the same camera as ``sra_sim``'s, ``inflarm_hw.nodes.camera_publisher``), so that
+``ball_tracker`` closes the soft arm's loop on either backend.
 
 Publishes:
     tip_position_truth (geometry_msgs/PointStamped, SENSOR_QOS): true inflatable-arm tip [m].
     spring_states_truth (sensor_msgs/JointState, SENSOR_QOS): true spring deflections [rad]
         and torques [N m].
     end_point_truth (geometry_msgs/PointStamped, SENSOR_QOS): true soft-arm end point [m].
-    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the end point as the camera
-        measures it (with noise), when ``publish_ball_position`` is true.
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the true end point plus
+        ``measurement_noise_m`` of noise, a stand-in for camera + tracker, only when
+        ``publish_ball_position`` is true (default false, as for ``sra_sim``).
+    camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
+        SENSOR_QOS: the simulated camera's view of the yellow ball at the soft arm's true end
+        point, at ``camera_rate_hz``, with the soft arm (plant 'sra' or 'both'), when
+        ``camera.enabled`` and while someone subscribes.
 Parameters:
     plant (string, read-only): 'arm', 'sra' or 'both'.
     device, link (string, read-only): the tty to use, or the symlink to make to the new pty.
-    rate_hz (double, read-only): physics and State report rate; io_rate_hz: line poll rate.
+    rate_hz (double, read-only): physics and State report rate (each step integrates the
+        wall-clock time since the previous one, ``inflarm_hw.realtime``); io_rate_hz: line poll
+        rate.
     protocol_version (int, read-only): the protocol it speaks (test an incompatible MCU).
     watchdog_default_s (double, read-only): command watchdog when HELLO asks for 0.
     arm.* (inflarm_model.nodes.arm_parameters), tip_force_n (runtime),
         initial_motor_positions_rad, motor.*, noise.position_rad, noise.effort_nm,
         wrinkling: the inflatable arm, as for arm_sim.
     noise.pressure_pa (double, read-only): pressure sensor noise.
-    measurement_noise_m, camera_rate_hz, truth_rate_hz, publish_ball_position: the camera
-        and the truth topics.
+    measurement_noise_m, camera_rate_hz, truth_rate_hz, publish_ball_position (default
+        false): the stand-in measurement, the camera rate and the truth topics.
+    valve_delay_s (double, read-only): the soft arm's valve transport delay [s].
+    camera.* : the simulated camera, as for ``sra_sim``.
     arm_frame_id, sra_frame_id (string, read-only); seed (int, read-only).
     fault.kind (string: '', clear, drop_bytes, corrupt_crc, silent, stick_sensor,
         over_pressure), fault.channel (int), fault.value (double), fault.duration_s (double):
@@ -43,12 +54,14 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from inflarm_hw.mcu_protocol import PROTOCOL_VERSION, FaultKind
+from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
 from inflarm_hw.nodes.plant_parameters import (
     ARM_PLANT_PARAMETERS,
     apply_arm_plant_parameter,
     arm_plant_from_parameters,
     check_arm_plant_parameters,
 )
+from inflarm_hw.realtime import ElapsedSteps
 from inflarm_hw.sim_mcu import McuPort, SimMcu, SimMcuParams
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.kinematics import FlexibleArm
@@ -58,6 +71,7 @@ from inflarm_msgs_json.ros.qos import SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
 
 PLANTS = ('arm', 'sra', 'both')
+_SRA = SoftArmPlantParams()
 FAULT_KINDS = {kind.name.lower(): kind for kind in FaultKind}
 PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('plant', 'both', "simulated robots behind the MCU: 'arm', 'sra' or 'both'",
@@ -74,14 +88,19 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
               range=(0.02, 2.0), read_only=True),
     Parameter('noise.pressure_pa', 20.0, 'pressure sensor noise (std) [Pa]',
               range=(0.0, 10000.0), read_only=True),
-    Parameter('measurement_noise_m', 0.0005, 'camera noise per axis [m]', range=(0.0, 0.05),
+    Parameter('measurement_noise_m', _SRA.noise_std,
+              'noise per axis of the stand-in ball_position [m]', range=(0.0, 0.05),
               read_only=True),
+    Parameter('valve_delay_s', _SRA.valve_delay,
+              "transport delay from a command to the soft arm's valve outputs [s]",
+              range=(0.0, 2.0), read_only=True),
     Parameter('camera_rate_hz', 5.0, 'simulated camera rate [Hz] (paper: about 5 Hz)',
               range=(0.1, 100.0), read_only=True),
     Parameter('truth_rate_hz', 10.0, 'rate of the truth topics [Hz]', range=(0.1, 500.0),
               read_only=True),
-    Parameter('publish_ball_position', True, 'publish the camera measurement on ball_position',
-              read_only=True),
+    Parameter('publish_ball_position', False,
+              'publish the true end point plus noise on ball_position (a stand-in for the '
+              'camera and ball_tracker)', read_only=True),
     Parameter('arm_frame_id', 'base_link', 'frame of the inflatable arm', read_only=True),
     Parameter('sra_frame_id', 'sra_mount', 'frame of the soft arm', read_only=True),
     Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
@@ -92,7 +111,7 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('fault.value', 0.0, 'share of bytes or frames (0-1), or pressure [Pa]'),
     Parameter('fault.duration_s', 0.0, 'how long the fault lasts [s]; 0: until cleared',
               range=(0.0, 3600.0)),
-)
+) + CAMERA_PARAMETERS
 
 
 def check_parameters(p: dict) -> None:
@@ -119,10 +138,17 @@ class SimMcuNode(GuardedCallbacks, Node):
         if p['plant'] in ('arm', 'both'):
             arm = arm_plant_from_parameters(p, rng)
         if p['plant'] in ('sra', 'both'):
-            sra = SoftArmPlant(1, SoftArmPlantParams(noise_std=p['measurement_noise_m']), rng)
+            sra = SoftArmPlant(1, SoftArmPlantParams(noise_std=p['measurement_noise_m'],
+                                                     valve_delay=p['valve_delay_s']), rng)
         self.mcu = SimMcu(arm, sra, p['arm.link_pressure_pa'], SimMcuParams(
             protocol_version=p['protocol_version'], default_watchdog_s=p['watchdog_default_s'],
             pressure_noise_pa=p['noise.pressure_pa']), rng)
+        self.camera = None
+        if sra is not None and p['camera.enabled']:
+            # before the port: building the renderer takes a while, and a bridge may send
+            # HELLO as soon as the port is printed
+            self.camera = CameraPublisher(self, p, lambda: self.mcu.sra.end_point[0],
+                                          None if seed < 0 else seed)
         self.port = McuPort(p['device'], p['link'])
         print(f'sim_mcu: serial port {self.port.path}', flush=True)
 
@@ -137,6 +163,7 @@ class SimMcuNode(GuardedCallbacks, Node):
                 self.ball_pub = self.create_publisher(PointStamped, 'ball_position', SENSOR_QOS)
                 self.create_guarded_timer(1.0 / p['camera_rate_hz'], self.publish_camera)
         self.dt = 1.0 / p['rate_hz']
+        self.elapsed = ElapsedSteps(max_step_s=1.0)  # physics keep pace with the wall clock
         self.create_guarded_timer(1.0 / p['io_rate_hz'], self.poll)
         self.create_guarded_timer(self.dt, self.step)
         self.create_guarded_timer(1.0 / p['truth_rate_hz'], self.publish_truth)
@@ -178,7 +205,9 @@ class SimMcuNode(GuardedCallbacks, Node):
             self.port.write(self.mcu.receive(data, time.monotonic()))
 
     def step(self) -> None:
-        self.port.write(self.mcu.step(self.dt, time.monotonic()))
+        dt = self.elapsed()
+        if dt > 0.0:
+            self.port.write(self.mcu.step(dt, time.monotonic()))
 
     def point(self, point, frame_id: str) -> PointStamped:
         msg = PointStamped()

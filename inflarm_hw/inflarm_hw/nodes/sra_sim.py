@@ -6,16 +6,23 @@ Subscribes:
 Publishes:
     chamber_pressures (std_msgs/String: ChamberPressures JSON, RELIABLE_QOS): measured [Pa].
     end_point_truth (geometry_msgs/PointStamped, SENSOR_QOS): true end point [m], for evaluation.
-    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the end point as the camera measures
-        it (with noise), when ``publish_ball_position`` is true.
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the true end point plus
+        ``measurement_noise_m`` of noise, a stand-in for camera + tracker, only when
+        ``publish_ball_position`` is true (default false: ``ball_tracker`` measures the ball
+        in the camera images).
     camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
         SENSOR_QOS: the simulated external camera's view of the yellow ball at the true end
         point, at ``camera_rate_hz``, when ``camera.enabled`` and while someone subscribes
         (``inflarm_hw.nodes.camera_publisher``).
 Parameters:
-    physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates.
-    publish_ball_position (bool): publish the simulated measurement on ``ball_position``.
-    measurement_noise_m (double): camera noise per axis [m].
+    physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates;
+        each physics step integrates the wall-clock time since the previous one
+        (``inflarm_hw.realtime``), so simulated time keeps pace with the controller's.
+    publish_ball_position (bool, read-only): publish the stand-in measurement on
+        ``ball_position`` (default false).
+    measurement_noise_m (double): its noise per axis [m].
+    valve_delay_s (double, read-only): transport delay from a command to the valve outputs
+        [s] (`inflarm_hw.sra_plant.SoftArmPlantParams.valve_delay`).
     cmd_timeout_s (double, 0.05-5): without a command for this long the MCU vents every chamber.
     max_chamber_pressure_pa (double, read-only): commands above this are rejected whole.
     frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
@@ -32,6 +39,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
+from inflarm_hw.realtime import ElapsedSteps
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
 from inflarm_msgs_json import ChamberPressures, PressureCommand
@@ -41,6 +49,7 @@ from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
+_PLANT = SoftArmPlantParams()
 PARAMETERS = (
     Parameter('physics_rate_hz', 50.0, 'simulation step rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
@@ -48,9 +57,14 @@ PARAMETERS = (
               range=(0.1, 1000.0), read_only=True),
     Parameter('camera_rate_hz', 5.0, 'simulated camera rate [Hz] (paper: about 5 Hz)',
               range=(0.1, 100.0), read_only=True),
-    Parameter('publish_ball_position', True,
-              'publish the simulated camera measurement on ball_position', read_only=True),
-    Parameter('measurement_noise_m', 0.0005, 'camera noise per axis [m]', range=(0.0, 0.05)),
+    Parameter('publish_ball_position', False,
+              'publish the true end point plus noise on ball_position (a stand-in for the '
+              'camera and ball_tracker)', read_only=True),
+    Parameter('measurement_noise_m', _PLANT.noise_std,
+              'noise per axis of the stand-in ball_position [m]', range=(0.0, 0.05)),
+    Parameter('valve_delay_s', _PLANT.valve_delay,
+              'transport delay from a command to the valve outputs [s]', range=(0.0, 2.0),
+              read_only=True),
     Parameter('cmd_timeout_s', 2.0, 'vent every chamber after this long without a command [s]',
               range=(0.05, 5.0)),
     Parameter('max_chamber_pressure_pa', CHAMBER_MAX_PRESSURE,
@@ -69,7 +83,8 @@ class SraSim(GuardedCallbacks, Node):
         self.params = declare_parameters(self, PARAMETERS)
         seed = self.params['seed']
         self.plant = SoftArmPlant(
-            n=1, params=SoftArmPlantParams(noise_std=self.params['measurement_noise_m']),
+            n=1, params=SoftArmPlantParams(noise_std=self.params['measurement_noise_m'],
+                                           valve_delay=self.params['valve_delay_s']),
             rng=np.random.default_rng(None if seed < 0 else seed))
         self.command = np.zeros(len(CHAMBERS))
         self.last_command_time = time.monotonic()
@@ -87,6 +102,9 @@ class SraSim(GuardedCallbacks, Node):
             self.create_guarded_timer(1.0 / self.params['camera_rate_hz'],
                                       self.publish_measurement)
         self.dt = 1.0 / self.params['physics_rate_hz']
+        # physics follow the wall clock: a late step (behind a rendered frame) integrates the
+        # time that really passed
+        self.elapsed = ElapsedSteps(max_step_s=1.0)
         self.create_guarded_timer(self.dt, self.step)
         self.create_guarded_timer(1.0 / self.params['state_rate_hz'], self.publish_state)
         self.camera = None
@@ -125,7 +143,9 @@ class SraSim(GuardedCallbacks, Node):
             self.get_logger().warning(
                 f"no chamber_pressure_command for {self.params['cmd_timeout_s']} s: "
                 'venting every chamber')
-        self.plant.step(self.command, self.dt)
+        dt = self.elapsed()
+        if dt > 0.0:
+            self.plant.step(self.command, dt)
 
     def point_msg(self, point: np.ndarray) -> PointStamped:
         msg = PointStamped()

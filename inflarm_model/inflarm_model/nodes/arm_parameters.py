@@ -9,6 +9,7 @@ import math
 
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import MEAN_STIFFNESS
+from inflarm_model.urdf import flexible_arm_urdf
 from inflarm_msgs_json.ros.parameters import Parameter
 
 ARM_PARAMETERS = (
@@ -47,3 +48,14 @@ def check_arm_parameters(values: dict) -> str | None:
 def arm_from_parameters(values: dict) -> FlexibleArm:
     """The :class:`FlexibleArm` the parameter values describe."""
     return FlexibleArm(values['arm.link_length_m'], values['arm.spring_offset_m'])
+
+
+def urdf_from_parameters(values: dict) -> str:
+    """The URDF of the arm the parameter values describe (``inflarm_model.urdf``)."""
+    return flexible_arm_urdf(
+        link_length=values['arm.link_length_m'],
+        spring_offset=values['arm.spring_offset_m'],
+        radius=values['arm.link_radius_m'],
+        stiffness=values['arm.spring_stiffness'],
+    )
+

@@ -13,8 +13,11 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from inflarm_model.nodes.arm_parameters import ARM_PARAMETERS, check_arm_parameters
-from inflarm_model.urdf import flexible_arm_urdf
+from inflarm_model.nodes.arm_parameters import (
+    ARM_PARAMETERS,
+    check_arm_parameters,
+    urdf_from_parameters,
+)
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import declare_parameters
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, publisher_events
@@ -48,13 +51,7 @@ class RobotDescription(GuardedCallbacks, Node):
             self.get_logger().info('stiffness changed: robot_description republished')
 
     def publish(self) -> None:
-        urdf = flexible_arm_urdf(
-            link_length=self.params['arm.link_length_m'],
-            spring_offset=self.params['arm.spring_offset_m'],
-            radius=self.params['arm.link_radius_m'],
-            stiffness=self.params['arm.spring_stiffness'],
-        )
-        self.description_pub.publish(String(data=urdf))
+        self.description_pub.publish(String(data=urdf_from_parameters(self.params)))
 
 
 def main(args: list[str] | None = None) -> None:
