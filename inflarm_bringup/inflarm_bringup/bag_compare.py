@@ -48,6 +48,7 @@ __all__ = [
     'Tolerances',
     'compare',
     'flatten',
+    'stamp_ns',
 ]
 
 STRING = 'std_msgs/msg/String'
@@ -73,7 +74,7 @@ QUANTITIES: Mapping[tuple[str, str], str] = {
     ('LinkStatus', 'pressure'): 'pressure',
     ('LinkStatus', 'wrinkling_moment'): 'torque',
     ('LinkStatus', 'moment'): 'torque',
-    ('LinkStatus', 'margin'): 'ratio',
+    ('LinkStatus', 'margin'): 'torque',  # wrinkling_moment - moment [N m]
 }
 #: Unit of each quantity, for the report.
 UNITS: Mapping[str, str] = {
@@ -399,7 +400,8 @@ class _Decoded:
     leaves: dict[str, tuple[str, Leaf]]
 
 
-def _stamp_ns(message: object) -> int | None:
+def stamp_ns(message: object) -> int | None:
+    """The header stamp [ns] of a decoded message, or None when it has no header."""
     stamp = getattr(getattr(message, 'header', None), 'stamp', None)
     return None if stamp is None else stamp.sec * 10**9 + stamp.nanosec
 
@@ -430,14 +432,14 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
         problems.append(f'message types differ: {types}')
     rec = _decode(recorded, problems, 'recorded')
     rep = _decode(replayed, problems, 'replayed')
-    stamps = [_stamp_ns(msg) for _, msg in (*rec, *rep)]
+    stamps = [stamp_ns(msg) for _, msg in (*rec, *rep)]
     by_stamp = bool(stamps) and all(s is not None and s > 0 for s in stamps)
 
     def decoded(pairs):
         out = []
         for m, msg in pairs:
             kind, leaves = flatten(msg, m.msgtype)
-            out.append(_Decoded(_stamp_ns(msg) if by_stamp else m.timestamp_ns, kind, leaves))
+            out.append(_Decoded(stamp_ns(msg) if by_stamp else m.timestamp_ns, kind, leaves))
         return sorted(out, key=lambda d: d.key_ns)
 
     a, b = decoded(rec), decoded(rep)
@@ -475,7 +477,6 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
                            len(recorded), len(replayed), matched,
                            tolerances.of(topic, 'unmatched'), outside, differences,
                            tuple(problems))
-
 
 
 def compare(recorded: Iterable[BagMessage], replayed: Iterable[BagMessage],

@@ -51,9 +51,17 @@ is taken from the recorded output of that node that is periodic at the timer's p
 earliest arrival modulo the period: a message is never recorded before its timer fired), e.g.
 ``chamber_pressure_command`` for the controller's 5 Hz step; and where that output was
 recorded within half a period of a due time, the timer fires when it was recorded instead
-(just before it), so that a firing the loaded machine delayed in the recording is delayed
-alike, and sees the same inputs. Without such an output a timer is first due one period after
-the bag's first message.
+(just before it; or at its header stamp, when the node stamps it with its clock, e.g.
+``motor_position_command``), so that a firing the loaded machine delayed in the recording is
+delayed alike, and sees the same inputs. An input that reaches a node less than
+``RECORD_ORDER_NS`` (1 ms) before one of its record-time firings goes to it just after the
+firing: a recorder takes in messages of different topics that arrive together in its own
+order. Without such an output a timer is first due one period after the bag's first message.
+
+Inputs follow the node's own lag: where a node's recorded outputs carry an input's stamp (the
+load estimator's estimates carry their joint_states sample's), the input reaches the node just
+before the first such output was recorded (`retime_inputs`), so a node that fell behind its
+inputs in the recording falls behind alike.
 
 Comparison (``inflarm_bringup.bag_compare``): per output topic recorded in the bag, counts,
 messages matched by header stamp or by time, the largest difference per field against
@@ -65,8 +73,9 @@ replayed outputs as a bag (``DIR/replayed``) and the report (``DIR/report.md``,
 """
 
 import argparse
+import bisect
 from collections import Counter
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 import os
 import pathlib
@@ -74,8 +83,15 @@ import sys
 
 import numpy as np
 
-from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, UNITS, Report, Tolerances, compare
-from inflarm_hw.bag import BagMessage, BagWriter, bag_info, read_messages
+from inflarm_bringup.bag_compare import (
+    DEFAULT_TOLERANCES,
+    UNITS,
+    Report,
+    Tolerances,
+    compare,
+    stamp_ns,
+)
+from inflarm_hw.bag import BagMessage, BagWriter, bag_info, deserialize, read_messages
 
 __all__ = [
     'INFRASTRUCTURE_TOPICS',
@@ -89,6 +105,7 @@ __all__ = [
     'main',
     'regression',
     'replay',
+    'retime_inputs',
     'select_nodes',
     'timer_due_times',
     'timer_phase',
@@ -106,6 +123,12 @@ INFRASTRUCTURE_TOPICS = frozenset({'/clock', '/parameter_events', '/rosout'})
 #: Outputs replayed but not compared: counts since the last report, which depend on where the
 #: reports fell in the recording.
 NOT_COMPARED = frozenset({'/diagnostics'})
+#: An input due at a node less than this before one of its timer firings aligned to record
+#: times [ns] goes to it after the firing: a recorder takes in the messages of different
+#: topics that are ready together in its own order (measured here: inputs recorded 0.06-0.2 ms
+#: before an output the node had published before taking them in; 3 ms and more before one it
+#: published after).
+RECORD_ORDER_NS = 1_000_000
 # Burst grouping and grid test of `timer_phase`.
 _MIN_BURSTS = 3
 _ON_GRID = 0.2  # a gap is on the grid within this share of a period
@@ -130,7 +153,9 @@ class NodeIo:
 class TimerSchedule:
     """When a node's timer fires in the replay: ``due_ns``, on the grid ``phase_ns + k
     period_ns`` or at the recorded output of ``aligned_to`` (None: the grid starts one period
-    after the bag's first message), ``recorded_firings`` of them."""
+    after the bag's first message), ``recorded_firings`` of them; ``by`` what the output's
+    times are: ``'stamp'`` (its header stamps, the node's clock when it published) or
+    ``'time'`` (its record times)."""
 
     node: str
     index: int
@@ -139,6 +164,7 @@ class TimerSchedule:
     aligned_to: str | None
     due_ns: tuple[int, ...]
     recorded_firings: int
+    by: str = 'time'
 
 
 @dataclass(frozen=True)
@@ -287,12 +313,13 @@ def bursts(times_ns: Sequence[int], period_ns: int) -> list[int]:
 
 
 def timer_due_times(period_ns: int, phase_ns: int | None, firings_ns: Sequence[int],
-                    start_ns: int, end_ns: int) -> tuple[list[int], int]:
+                    start_ns: int, end_ns: int, offset_ns: int = -1) -> tuple[list[int], int]:
     """When a timer fires in a replay from ``start_ns`` to ``end_ns`` [ns].
 
     On the grid ``phase_ns + k period_ns`` (``start_ns + period_ns`` on when ``phase_ns`` is
     None), except where one of ``firings_ns`` (recorded outputs of the timer, `bursts`) is
-    within half a period of a grid time: then 1 ns before that recorded output.
+    within half a period of a grid time: then at that output plus ``offset_ns`` (-1: just
+    before its record time; 0: at its stamp, the node's clock when it published).
 
     Returns
     -------
@@ -311,34 +338,125 @@ def timer_due_times(period_ns: int, phase_ns: int | None, firings_ns: Sequence[i
     for g in grid.tolist():
         k = int(np.searchsorted(fired, g))
         near = [int(f) for f in fired[max(k - 1, 0):k + 1] if abs(int(f) - g) < period_ns // 2]
-        t = min(near, key=lambda f: abs(f - g)) - 1 if near else g
+        t = min(near, key=lambda f: abs(f - g)) + offset_ns if near else g
         if (not due or t > due[-1]) and start_ns <= t <= end_ns:
             due.append(t)
             recorded += bool(near)
     return due, recorded
 
 
-def _schedules(io: NodeIo, recorded_times: Mapping[str, Sequence[int]], start_ns: int,
-               end_ns: int) -> list[TimerSchedule]:
+def _schedules(io: NodeIo, recorded: Mapping[str, Sequence[tuple[int, int | None]]],
+               start_ns: int, end_ns: int) -> list[TimerSchedule]:
+    # recorded: output topic -> [(record time, header stamp or None)]. A stamped output is
+    # tried by its stamps first: a node stamping with its clock gives the exact firing times.
     schedules = []
     for index, period in enumerate(io.timer_periods_ns):
         phase = topic = None
-        for candidate in sorted(io.outputs, key=lambda t: -len(recorded_times.get(t, ()))):
-            phase = timer_phase(recorded_times.get(candidate, ()), period)
-            if phase is not None:
-                topic = candidate
+        by, firings, offset = 'time', [], -1
+        for candidate in sorted(io.outputs, key=lambda t: -len(recorded.get(t, ()))):
+            pairs = recorded.get(candidate, ())
+            ways = [('time', [t for t, _ in pairs], -1)]
+            if pairs and all(s is not None for _, s in pairs):
+                ways.insert(0, ('stamp', [s for _, s in pairs], 0))
+            for way in ways:
+                phase = timer_phase(way[1], period)
+                if phase is not None:
+                    topic, by, firings, offset = candidate, way[0], bursts(way[1], period), way[2]
+                    break
+            if topic is not None:
                 break
-        firings = bursts(recorded_times[topic], period) if topic else []
-        due, recorded = timer_due_times(period, phase, firings, start_ns, end_ns)
+        due, fired = timer_due_times(period, phase, firings, start_ns, end_ns, offset)
         schedules.append(TimerSchedule(io.name, index, period, phase, topic, tuple(due),
-                                       recorded))
+                                       fired, by))
     return schedules
 
 
-def _counted(messages: Iterable[BagMessage], counts: Counter) -> Iterator[BagMessage]:
-    for m in messages:
-        counts[m.topic] += 1
-        yield m
+def _stamp_of(message: BagMessage) -> int | None:
+    try:
+        stamp = stamp_ns(deserialize(message.data, message.msgtype))
+    except ValueError:
+        return None
+    return stamp if stamp else None
+
+
+def retime_inputs(inputs: Sequence[BagMessage], subscribers: Mapping[str, Sequence[str]],
+                  consumed: Mapping[tuple[str, str], Mapping[int, int]],
+                  firings: Mapping[str, Sequence[int]] | None = None
+                  ) -> list[tuple[BagMessage, tuple[str, ...]]]:
+    """When each recorded input reaches each node that subscribes to it.
+
+    At its record time, except where the node's recorded outputs carry the input's stamp
+    (``consumed[(node, topic)]``: stamp -> earliest record time of such an output): the node
+    had taken the input in by then, so it gets it just before that (never before its record
+    time, and in the topic's order). So a node that lagged behind its inputs in the recording
+    (e.g. load_estimator on a loaded machine) lags alike in the replay, and its timers see the
+    inputs it had seen. An input that would reach a node less than `RECORD_ORDER_NS` before
+    one of ``firings[node]`` reaches it 1 ns after that firing instead.
+
+    Parameters
+    ----------
+    inputs : sequence of BagMessage
+        In record-time order.
+    subscribers : mapping of str to sequence of str
+        Topic -> the nodes under test that subscribe to it.
+    consumed : mapping
+        ``(node, topic)`` -> ``{stamp [ns]: record time [ns]}``.
+    firings : mapping of str to sequence of int, optional
+        Node -> increasing times [ns] its timers fire at, aligned to record times.
+
+    Returns
+    -------
+    list of (BagMessage, tuple of str)
+        Messages (with their delivery times as ``timestamp_ns``) and the nodes they go to, in
+        delivery order.
+    """
+    last: dict[tuple[str, str], int] = {}
+    out: list[tuple[int, int, BagMessage, tuple[str, ...]]] = []
+    for seq, m in enumerate(inputs):
+        by_time: dict[int, list[str]] = {}
+        for node in subscribers.get(m.topic, ()):
+            when = m.timestamp_ns
+            done = consumed.get((node, m.topic))
+            if done:
+                stamp = _stamp_of(m)
+                if stamp is not None and stamp in done:
+                    when = max(when, done[stamp] - 1)
+            fired = (firings or {}).get(node, ())
+            k = bisect.bisect_left(fired, when)
+            if k < len(fired) and fired[k] - when < RECORD_ORDER_NS:
+                when = fired[k] + 1
+            when = max(when, last.get((node, m.topic), when))
+            last[(node, m.topic)] = when
+            by_time.setdefault(when, []).append(node)
+        for when, nodes in by_time.items():
+            out.append((when, seq, m._replace(timestamp_ns=when), tuple(nodes)))
+    out.sort(key=lambda item: (item[0], item[1]))
+    return [(m, nodes) for _, _, m, nodes in out]
+
+
+def _consumed(chosen: Sequence[NodeIo], inputs: Sequence[BagMessage],
+              recorded: Mapping[str, Sequence[tuple[int, int | None]]]
+              ) -> dict[tuple[str, str], dict[int, int]]:
+    # (node, input topic) -> {stamp: earliest record time of an output of that node with it},
+    # for the input topics most of whose stamps reappear on an output of the node.
+    stamps: dict[str, set[int]] = {}
+    for m in inputs:
+        stamp = _stamp_of(m)
+        if stamp is not None:
+            stamps.setdefault(m.topic, set()).add(stamp)
+    consumed = {}
+    for io in chosen:
+        for topic in io.inputs:
+            done: dict[int, int] = {}
+            for output in io.outputs:
+                pairs = [(s, t) for t, s in recorded.get(output, ()) if s is not None]
+                if stamps.get(topic) and 2 * sum(s in stamps[topic] for s, _ in pairs) >= len(
+                        stamps[topic]):
+                    for s, t in pairs:
+                        done[s] = min(t, done.get(s, t))
+            if done:
+                consumed[(io.name, topic)] = done
+    return consumed
 
 
 def replay(bag: str | os.PathLike, nodes: Sequence[str] | None = None,
@@ -384,15 +502,21 @@ def replay(bag: str | os.PathLike, nodes: Sequence[str] | None = None,
         produced = {t for io in chosen for t in io.outputs}
         input_topics = sorted({t for io in chosen for t in io.inputs
                                if t in info.topics and t not in produced})
-        recorded_times: dict[str, list[int]] = {}
+        recorded: dict[str, list[tuple[int, int | None]]] = {}
         for m in read_messages(bag, sorted(produced & set(info.topics))):
-            recorded_times.setdefault(m.topic, []).append(m.timestamp_ns)
+            recorded.setdefault(m.topic, []).append((m.timestamp_ns, _stamp_of(m)))
         end_ns = info.start_ns + info.duration_ns
         timers = tuple(s for io in chosen
-                       for s in _schedules(io, recorded_times, info.start_ns, end_ns))
-        counts: Counter[str] = Counter()
-        nodes_under_test.run(_counted(read_messages(bag, input_topics), counts), info.start_ns,
-                             end_ns, {(s.node, s.index): s.due_ns for s in timers})
+                       for s in _schedules(io, recorded, info.start_ns, end_ns))
+        inputs = list(read_messages(bag, input_topics))
+        subscribers = {t: [io.name for io in chosen if t in io.inputs] for t in input_topics}
+        firings = {io.name: sorted(t for s in timers if s.node == io.name and s.by == 'time'
+                                   and s.aligned_to for t in s.due_ns) for io in chosen}
+        deliveries = retime_inputs(inputs, subscribers, _consumed(chosen, inputs, recorded),
+                                   firings)
+        nodes_under_test.run(deliveries, info.start_ns, end_ns,
+                             {(s.node, s.index): s.due_ns for s in timers})
+        counts = Counter(m.topic for m in inputs)
         outputs = tuple(nodes_under_test.outputs)
     return Replay(pathlib.Path(bag), chosen, {io.name: node_files[io.name] for io in chosen},
                   {t: counts[t] for t in input_topics}, timers, outputs, info.start_ns, end_ns)
@@ -431,8 +555,8 @@ def describe(result: Replay) -> str:
     inputs = ', '.join(f'{t} ({n})' for t, n in result.inputs.items()) or 'none'
     timers = ', '.join(
         f'{s.node} {s.period_ns * 1e-9:g} s '
-        + (f'aligned to {s.aligned_to} ({s.recorded_firings} of {len(s.due_ns)} firings as '
-           'recorded)' if s.aligned_to else 'from the start')
+        + (f'aligned to {s.aligned_to} {s.by}s ({s.recorded_firings} of {len(s.due_ns)} '
+           'firings as recorded)' if s.aligned_to else 'from the start')
         for s in result.timers) or 'none'
     return '\n'.join([
         f'nodes under test: {", ".join(io.name for io in result.nodes)}',

@@ -15,10 +15,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 import yaml
 
-from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, QUANTITIES, compare, flatten
-from inflarm_bringup.bag_regression import main, regression, replay, select_nodes, timer_phase
-from inflarm_bringup.bag_regression import NodeIo
-from inflarm_hw.bag import BagWriter, bag_info, deserialize, read_messages
+from inflarm_bringup.bag_regression import (
+    main,
+    regression,
+    replay,
+)
+from inflarm_hw.bag import BagWriter, bag_info
 from inflarm_msgs_json import ControlTask, TrialReport, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
@@ -67,9 +69,12 @@ def record_run(node_processes, executor, bag: pathlib.Path, params_file: pathlib
                              else 'inflarm_estimation', node, '--params-file', arm_yaml)
     node_processes.start('inflarm_hw', 'arm_sim', '--params-file', arm_yaml,
                          parameters={'seed': 7})
-    # The camera measurement at 20 Hz, the controller at 5 Hz (its installed rate).
+    # The ball position from sra_sim's stand-in measurement (no camera and ball_tracker: they
+    # are not under test, and rendering would load the machine) at 20 Hz; the controller at
+    # 5 Hz (its installed rate).
     node_processes.start('inflarm_hw', 'sra_sim', parameters={
-        'seed': 7, 'camera.enabled': False, 'camera_rate_hz': 20.0})
+        'seed': 7, 'camera.enabled': False, 'publish_ball_position': True,
+        'camera_rate_hz': 20.0})
     node_processes.start('inflarm_control', 'pressure_controller', '--params-file',
                          str(params_file))
     node_processes.start('inflarm_hw', 'bag_recorder', parameters={

@@ -194,14 +194,15 @@ class LockstepNodes:
         for callback in clocks:
             callback(msg)
 
-    def run(self, inputs: Iterable[BagMessage], start_ns: int, end_ns: int,
-            due: Mapping[tuple[str, int], Sequence[int]]) -> int:
+    def run(self, inputs: Iterable[tuple[BagMessage, Sequence[str]]], start_ns: int,
+            end_ns: int, due: Mapping[tuple[str, int], Sequence[int]]) -> int:
         """Deliver ``inputs`` and fire the timers from ``start_ns`` to ``end_ns``.
 
         Parameters
         ----------
-        inputs : iterable of BagMessage
-            In time order; each goes to every subscription on its topic.
+        inputs : iterable of (BagMessage, sequence of str)
+            In time order, each with the nodes it goes to (to each of their subscriptions on
+            its topic).
         start_ns, end_ns : int
             The simulated time span [ns]: the clocks start at ``start_ns``; timers due up to
             ``end_ns`` fire after the last input.
@@ -215,14 +216,14 @@ class LockstepNodes:
         int
             The number of inputs delivered. The outputs are in ``self.outputs``.
         """
-        subscribers: dict[str, list] = {}
+        subscribers: dict[str, list] = {}  # topic -> [(node name, subscription)]
         clocks = []
-        for node in self.nodes.values():
+        for name, node in self.nodes.items():
             for sub in node.subscriptions:
                 if sub.topic_name == '/clock':
                     clocks.append(sub.callback)
                 elif sub.topic_name not in INFRASTRUCTURE_TOPICS:
-                    subscribers.setdefault(sub.topic_name, []).append(sub)
+                    subscribers.setdefault(sub.topic_name, []).append((name, sub))
         self._now_ns = -1
         self._set_time(start_ns, clocks)
         timers: list[tuple[Node, object, Iterator[int]]] = []
@@ -236,9 +237,10 @@ class LockstepNodes:
                 if first is not None:
                     heapq.heappush(heap, (first, len(timers) - 1))
 
-        def deliver(message: BagMessage) -> None:
-            for sub in subscribers.get(message.topic, ()):
-                sub.callback(deserialize_message(message.data, sub.msg_type))
+        def deliver(message: BagMessage, to: Sequence[str] | None = None) -> None:
+            for name, sub in subscribers.get(message.topic, ()):
+                if to is None or name in to:
+                    sub.callback(deserialize_message(message.data, sub.msg_type))
 
         def drain() -> None:
             while self._pending:
@@ -258,10 +260,10 @@ class LockstepNodes:
                 drain()
 
         count = 0
-        for message in inputs:
+        for message, to in inputs:
             fire_until(message.timestamp_ns, inclusive=False)
             self._set_time(message.timestamp_ns, clocks)
-            deliver(message)
+            deliver(message, to)
             drain()
             count += 1
         fire_until(end_ns, inclusive=True)
