@@ -12,7 +12,13 @@ message), so that a stream at a fixed rate never pairs a message with its neighb
 is left over on either side is unmatched, except replayed messages outside the span of the
 recorded ones (by more than that window): a recorder sees a topic only from when it
 subscribed to it until it stopped, while the replay runs over the whole bag. They are counted
-as ``outside``.
+as ``outside``. Within the window a message is paired only with one of the same names and
+frames (its exact fields: e.g. the link of a LinkStatus), so a lost one does not shift the
+rest. ``from_ns`` leaves a topic's start-up out on both sides (``skipped``). For a timer's
+outputs (``neighbours``), a recorded message out of tolerance against its replayed one may
+match the ``alternative`` replay's message of the same key instead (its ambiguous inputs in
+the other order: ``by_alternative``); one out of tolerance in both counts as unmatched
+(``out_of_tolerance``), within the ``unmatched`` share.
 
 Fields. Each message is flattened into leaves (``position[2]``, ``wrench.force.x``; for inflarm
 JSON messages in ``std_msgs/String``, the JSON fields: ``chambers.B1``, ``rmse[0]``), grouped by
@@ -27,6 +33,7 @@ Tolerances (`Tolerances`) are absolute, in SI units, per quantity and optionally
 count) that may be left unmatched, e.g. a sample a best-effort recorder lost.
 """
 
+import bisect
 from collections.abc import Iterable, Mapping, Sequence
 import csv
 from dataclasses import dataclass, field, fields, is_dataclass
@@ -145,6 +152,11 @@ class Tolerances:
 DEFAULT_TOLERANCES = Tolerances({
     'position': 1e-4, 'velocity': 1e-3, 'force': 1e-3, 'torque': 1e-3, 'pressure': 100.0,
     'time': 0.25, 'ratio': 1e-4, 'unmatched': 0.05,
+    # A trial's RMSE over its N steps (20 in a 4 s trial at 5 Hz): one step that took the
+    # 20 Hz ball sample next to the recorded one (ordering ambiguity) changes one error by
+    # the ball's motion in 50 ms, delta (up to ~4 mm at the trial's start), and the RMSE by at
+    # most delta / sqrt(N) ~ 1 mm; a changed controller moves it by centimetres.
+    '/trial_report:position': 1e-3,
 })
 
 
@@ -182,6 +194,9 @@ class TopicComparison:
     outside: int = 0  # replayed messages outside the recorded span: not matched, not counted
     fields: tuple[FieldDifference, ...] = ()
     problems: tuple[str, ...] = ()  # messages that could not be decoded, type mismatches
+    skipped: int = 0  # recorded messages in the start-up period: not compared, not counted
+    by_alternative: int = 0  # recorded messages matched by the other order's replay
+    out_of_tolerance: int = 0  # paired, out of tolerance in both orders: unmatched
 
     @property
     def unmatched_share(self) -> float:
@@ -204,7 +219,9 @@ class TopicComparison:
             out.append(f'{self.unmatched_share:.1%} of the messages unmatched (tolerance '
                        f'{self.unmatched_tolerance:.1%}): {self.recorded} recorded, '
                        f'{self.replayed - self.outside} replayed in their span, '
-                       f'{self.matched} matched')
+                       f'{self.matched} matched'
+                       + (f', {self.out_of_tolerance} paired but out of tolerance in both '
+                          'input orders' if self.out_of_tolerance else ''))
         for f in self.fields:
             if not f.passed:
                 unit = UNITS[f.quantity]
@@ -424,8 +441,39 @@ def _match_window(keys: Sequence[int]) -> float:
     return max(spacing / 2.0, 1.0)
 
 
+def _signature(d: _Decoded) -> tuple:
+    # What must be equal (names, frames, links): a message is only ever paired with one of
+    # the same signature.
+    return tuple(sorted((path, repr(value)) for path, (group, value) in d.leaves.items()
+                        if QUANTITIES.get((d.kind, group), 'exact') == 'exact'))
+
+
+def _differences(a: _Decoded, b: _Decoded) -> dict[str, tuple[str, float]]:
+    out: dict[str, tuple[str, float]] = {}
+    for path in a.leaves.keys() | b.leaves.keys():
+        group = (a.leaves.get(path) or b.leaves[path])[0]
+        left = a.leaves.get(path, (group, _MISSING))[1]
+        right = b.leaves.get(path, (group, _MISSING))[1]
+        diff = math.inf if _MISSING in (left, right) else _difference(left, right)
+        quantity = QUANTITIES.get((a.kind, group), 'exact')
+        if group not in out or diff > out[group][1]:
+            out[group] = (quantity, diff)
+    return out
+
+
+def _badness(diffs: Mapping[str, tuple[str, float]], topic: str,
+             tolerances: Tolerances) -> float:
+    # The largest difference in tolerances (0: equal; > 1: out of tolerance).
+    worst = 0.0
+    for quantity, diff in diffs.values():
+        tol = tolerances.of(topic, quantity)
+        worst = max(worst, (0.0 if diff == 0 else math.inf) if tol == 0 else diff / tol)
+    return worst
+
+
 def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequence[BagMessage],
-                   tolerances: Tolerances) -> TopicComparison:
+                   tolerances: Tolerances, from_ns: int | None = None,
+                   alternative: Sequence[BagMessage] | None = None) -> TopicComparison:
     problems: list[str] = []
     types = sorted({m.msgtype for m in (*recorded, *replayed)})
     if len(types) > 1:
@@ -443,6 +491,11 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
         return sorted(out, key=lambda d: d.key_ns)
 
     a, b = decoded(rec), decoded(rep)
+    skipped = 0
+    if from_ns is not None:  # the start-up period is not compared (on either side)
+        skipped = sum(d.key_ns < from_ns for d in a)
+        a = [d for d in a if d.key_ns >= from_ns]
+        b = [d for d in b if d.key_ns >= from_ns]
     window = _match_window([d.key_ns for d in a])
     inside = [d for d in b if a and a[0].key_ns - window <= d.key_ns <= a[-1].key_ns + window]
     outside = len(b) - len(inside) if a else 0
@@ -450,17 +503,45 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
     kinds = sorted({d.kind for d in (*a, *b)})
     if len(kinds) > 1:
         problems.append(f'message kinds differ: {kinds}')
+    sig_a, sig_b = [_signature(d) for d in a], [_signature(d) for d in b]
+    alt = decoded(_decode(alternative or (), problems, 'alternative'))
+    alt_keys = [d.key_ns for d in alt]
+
+    def near(i: int, j: int) -> bool:
+        return i < len(a) and j < len(b) and abs(b[j].key_ns - a[i].key_ns) <= window
+
+    def alternatives(i: int) -> list[_Decoded]:
+        # The other replay's messages of a[i]'s key and signature.
+        lo = bisect.bisect_left(alt_keys, a[i].key_ns - window)
+        hi = bisect.bisect_right(alt_keys, a[i].key_ns + window)
+        return [d for d in alt[lo:hi] if _signature(d) == sig_a[i]]
+
     worst: dict[str, tuple[str, float, int]] = {}  # group -> (quantity, diff, key)
-    matched = i = j = 0
+    matched = by_alternative = out_of_tolerance = i = j = 0
     while i < len(a) and j < len(b):
         gap = b[j].key_ns - a[i].key_ns
         if abs(gap) <= window:
-            for path in a[i].leaves.keys() | b[j].leaves.keys():
-                group = (a[i].leaves.get(path) or b[j].leaves[path])[0]
-                left = a[i].leaves.get(path, (group, _MISSING))[1]
-                right = b[j].leaves.get(path, (group, _MISSING))[1]
-                diff = math.inf if _MISSING in (left, right) else _difference(left, right)
-                quantity = QUANTITIES.get((a[i].kind, group), 'exact')
+            if sig_a[i] != sig_b[j]:  # e.g. one link's status lost: pair the others by name
+                if near(i + 1, j) and sig_a[i + 1] == sig_b[j]:
+                    i += 1
+                    continue
+                if near(i, j + 1) and sig_a[i] == sig_b[j + 1]:
+                    j += 1
+                    continue
+            diffs = _differences(a[i], b[j])
+            if alternative is not None and _badness(diffs, topic, tolerances) > 1.0:
+                first = diffs
+                for other in alternatives(i):
+                    again = _differences(a[i], other)
+                    if _badness(again, topic, tolerances) < _badness(diffs, topic, tolerances):
+                        diffs = again
+                if _badness(diffs, topic, tolerances) > 1.0:  # left unmatched (counted)
+                    out_of_tolerance += 1
+                    i += 1
+                    j += 1
+                    continue
+                by_alternative += diffs is not first
+            for group, (quantity, diff) in diffs.items():
                 if group not in worst or diff > worst[group][1]:
                     worst[group] = (quantity, diff, a[i].key_ns)
             matched += 1
@@ -474,14 +555,16 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
         FieldDifference(group, quantity, diff, tolerances.of(topic, quantity), key)
         for group, (quantity, diff, key) in sorted(worst.items()))
     return TopicComparison(topic, types[0] if types else '', 'stamp' if by_stamp else 'time',
-                           len(recorded), len(replayed), matched,
+                           len(a), len(b) + outside, matched,
                            tolerances.of(topic, 'unmatched'), outside, differences,
-                           tuple(problems))
+                           tuple(problems), skipped, by_alternative, out_of_tolerance)
 
 
 def compare(recorded: Iterable[BagMessage], replayed: Iterable[BagMessage],
             tolerances: Tolerances = DEFAULT_TOLERANCES,
-            topics: Iterable[str] | None = None) -> Report:
+            topics: Iterable[str] | None = None, from_ns: Mapping[str, int] | None = None,
+            neighbours: Iterable[str] = (),
+            alternative: Iterable[BagMessage] = ()) -> Report:
     """Compare recorded with replayed messages, topic by topic.
 
     Parameters
@@ -494,6 +577,17 @@ def compare(recorded: Iterable[BagMessage], replayed: Iterable[BagMessage],
     topics : iterable of str, optional
         The topics to compare; default: those on both sides. A topic on one side only is
         compared too when named here (and fails: nothing matches).
+    from_ns : mapping of str to int, optional
+        Topic -> the start of its comparison [ns] (stamp or time, the topic's match key):
+        messages before it on either side are start-up, not compared (counted as
+        ``skipped``).
+    neighbours : iterable of str
+        Topics (the outputs of timers) whose recorded message, out of tolerance against the
+        replayed one, may match the ``alternative`` message of the same key and names
+        instead: a timer can see an input taken in at about the moment it fired either
+        before or after it (module docstring).
+    alternative : iterable of BagMessage
+        The other replay's outputs (inputs ambiguous against a firing in the other order).
 
     Returns
     -------
@@ -504,11 +598,17 @@ def compare(recorded: Iterable[BagMessage], replayed: Iterable[BagMessage],
     for side, messages in ((0, recorded), (1, replayed)):
         for m in messages:
             by_topic.setdefault(m.topic, ([], []))[side].append(m)
+    others: dict[str, list[BagMessage]] = {}
+    for m in alternative:
+        others.setdefault(m.topic, []).append(m)
     if topics is None:
         names = sorted(t for t, (a, b) in by_topic.items() if a and b)
         not_compared = tuple(sorted(t for t, (a, b) in by_topic.items() if b and not a))
     else:
         names = sorted({normalize_topic(t) for t in topics})
         not_compared = ()
-    return Report(tuple(_compare_topic(t, *by_topic.get(t, ([], [])), tolerances)
+    starts = {normalize_topic(t): v for t, v in (from_ns or {}).items()}
+    near = {normalize_topic(t) for t in neighbours}
+    return Report(tuple(_compare_topic(t, *by_topic.get(t, ([], [])), tolerances,
+                                       starts.get(t), others.get(t, []) if t in near else None)
                         for t in names), not_compared)

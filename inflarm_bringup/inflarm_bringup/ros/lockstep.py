@@ -136,6 +136,9 @@ class LockstepNodes:
         self.outputs: list[BagMessage] = []
         self._pending: deque[BagMessage] = deque()
         self._now_ns = 0
+        #: Topics published from a timer callback (the outputs whose timing is the timer's).
+        self.timer_topics: set[str] = set()
+        self._in_timer = False
         try:
             for name, path in classes.items():
                 self.nodes[name] = self._build(name, path, params_files.get(name, ()))
@@ -185,6 +188,8 @@ class LockstepNodes:
         message = BagMessage(topic, msgtype, self._now_ns, data)
         self.outputs.append(message)
         self._pending.append(message)
+        if self._in_timer:
+            self.timer_topics.add(topic)
 
     def _set_time(self, now_ns: int, clocks: Sequence[Callable]) -> None:
         if now_ns == self._now_ns:
@@ -256,7 +261,11 @@ class LockstepNodes:
                 if timer not in node.timers or timer.is_canceled():
                     continue
                 self._set_time(when, clocks)
-                timer.callback()
+                self._in_timer = True
+                try:
+                    timer.callback()
+                finally:
+                    self._in_timer = False
                 drain()
 
         count = 0
