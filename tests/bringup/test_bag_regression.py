@@ -15,12 +15,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 import yaml
 
+from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, compare
 from inflarm_bringup.bag_regression import (
     main,
     regression,
     replay,
 )
-from inflarm_hw.bag import BagWriter, bag_info
+from inflarm_hw.bag import BagWriter, bag_info, read_messages
 from inflarm_msgs_json import ControlTask, TrialReport, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
@@ -173,6 +174,36 @@ def test_a_changed_spring_stiffness_fails_naming_the_topics(recorded, tmp_path, 
     assert 'FAIL /estimated_wrench: wrench.force differs by' in printed
     assert 'FAIL /estimated_joint_states: position differs by' in printed
     assert 'nodes under test: load_estimator\n' in printed
+    # The link status, matched to the nearest recorded one within 0.1 s: its values differ.
+    assert 'FAIL /link_status:' in printed and 'out of tolerance in both input orders' in printed
+
+
+def test_a_changed_ik_stiffness_fails_on_the_motor_commands(recorded, tmp_path, capsys):
+    # A 10 % stiffer IK model (x 0.9 makes the path unreachable: the IK rejects it).
+    bag, params_file = recorded
+    stiffness = [1.1 * k for k in _installed_arm_parameters()['arm.spring_stiffness']]
+    stiffer = tmp_path / 'stiffer_ik.yaml'
+    stiffer.write_text(yaml.safe_dump({'elastostatic_ik': {'ros__parameters': {
+        'arm.spring_stiffness': stiffness}}}))
+    code = main([str(bag), '--nodes', 'elastostatic_ik', '--params-file', str(params_file),
+                 str(stiffer)])
+    printed = capsys.readouterr().out
+    assert code == 1, printed
+    assert 'FAIL /motor_position_command:' in printed
+    assert 'nodes under test: elastostatic_ik\n' in printed
+    # The margin: every command compared one for one, without the other input order.
+    result = replay(bag, ['elastostatic_ik'], [params_file, stiffer])
+    report = compare(read_messages(bag, ['/motor_position_command']), result.outputs,
+                     topics=['/motor_position_command'])
+    position = next(f for f in report.topics[0].fields if f.group == 'position')
+    assert position.max_abs_diff > 3 * DEFAULT_TOLERANCES.of('/motor_position_command',
+                                                             'position'), position
+
+
+def _installed_arm_parameters() -> dict:
+    from ament_index_python.packages import get_package_share_directory
+    arm_yaml = pathlib.Path(get_package_share_directory(ARM_CONFIG[0]), 'config', ARM_CONFIG[1])
+    return yaml.safe_load(arm_yaml.read_text())['/**']['ros__parameters']
 
 
 def test_a_bag_without_the_needed_topics_is_rejected_with_what_is_missing(tmp_path, capsys):
