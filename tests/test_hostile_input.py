@@ -283,7 +283,8 @@ NODES = {
             lambda n: to_string_msg(ControlTask('sra_mount', (0.1, 0.11, 0.67), 'pid', 3)),
             lambda n, out: n.trial_active and n.task.trial_id == 3),
         'planned_path': (lambda n: path([(0.0, 0.0, 0.61), (0.05, 0.0, 0.62)], 'sra_mount', n),
-                         lambda n, out: len(n.waypoints) == 1)}),
+                         lambda n, out: n.follower.active
+                         and n.follower.goal.tolist() == [0.05, 0.0, 0.62])}),
     'trial_runner': NodeCase(TrialRunner, valid={
         'trial_report': (lambda n: _report(n), lambda n, out: n.trial == 1)}),
     'hw_bridge': NodeCase(HwBridge, prepare=start_sim_mcu, start=configure_and_activate, valid={

@@ -33,11 +33,6 @@ from ament_index_python.packages import get_package_share_directory
 import yaml
 
 from inflarm_bringup.processes import NodeProcess, config_path
-from inflarm_model.nodes.arm_parameters import (
-    ARM_PARAMETERS,
-    check_arm_parameters,
-    urdf_from_parameters,
-)
 
 # The inflatable arm's geometry, stiffness and pressures, shared by every node that models it.
 ARM_CONFIG = (('inflarm_model', 'inflatable_arm.yaml'),)
@@ -157,6 +152,8 @@ def arm_parameters_from_file(path: str) -> dict:
             given = yaml.safe_load(file)['/**']['ros__parameters']
     except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
         raise ValueError(f'{path}: not a parameter file keyed /** ({error!r})') from error
+    # The node-side table imports rclpy: only when asked, so that the launcher's core does not.
+    from inflarm_model.nodes.arm_parameters import ARM_PARAMETERS, check_arm_parameters
     values = {p.name: given.get(p.name, p.default) for p in ARM_PARAMETERS}
     problem = check_arm_parameters(values)
     if problem is not None:
@@ -172,6 +169,7 @@ def rviz_config() -> str:
 def visualization_nodes() -> tuple[NodeProcess, ...]:
     """What RViz needs besides the system: TF of the estimated deflected arm (its URDF from
     the shared arm configuration), the static frames, and rviz2 itself."""
+    from inflarm_model.nodes.arm_parameters import urdf_from_parameters
     urdf = urdf_from_parameters(arm_parameters_from_file(config_path(*ARM_CONFIG[0])))
     frames = tuple(_static_frame(*frame) for frame in STATIC_FRAMES)
     return (

@@ -76,8 +76,8 @@ class PathFollowingParams:
     bellows_preload: float = 6e3
     p_max: tuple[float, float, float, float, float] = (CHAMBER_MAX_PRESSURE,) * 5
     speed: float = 0.005
-    slow_error: float = 0.002
-    stop_error: float = 0.006
+    slow_error: float = 0.0015
+    stop_error: float = 0.004
     feedforward_lead: float = 0.0
     workspace: Workspace = WORKSPACE_POSITIVE
 

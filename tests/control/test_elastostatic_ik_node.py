@@ -186,3 +186,26 @@ def test_resample_keeps_the_waypoints_and_bounds_the_step():
     assert np.diff(fine).max() <= 0.3 + 1e-12
     for t, x in zip(times, x_d, strict=True):
         np.testing.assert_allclose(x_fine[np.argmin(np.abs(fine - t))], x)
+
+
+def test_a_late_trajectory_is_joined_where_it_is_due_and_relative_stamps_start_now(executor):
+    rig = Rig(executor, **{'load.source': 'configured'})
+    rig.joints()
+    first = deflected_tip(Q_M)
+    times = np.linspace(0.0, 2.0, 21)
+    points = first + np.outer(times, [-0.02, 0.02, 0.01])
+    now = rig.node.get_clock().now()
+    # Due 0.5 s ago: it runs on its stamps, not 0.5 s behind them.
+    rig.path_pub.publish(path_msg(points, times, now - Duration(seconds=0.5)))
+    assert spin_until(executor, lambda: rig.node.trajectory is not None)
+    assert rig.node.trajectory_start_ns == (now - Duration(seconds=0.5)).nanoseconds
+    assert spin_until(executor, lambda: rig.node.trajectory is None, timeout_s=5.0)
+    # Ended before it arrived: rejected, naming why.
+    rig.path_pub.publish(path_msg(points, times, now - Duration(seconds=10.0)))
+    rig.idle()
+    assert 'nothing of it is due' in rig.node.problems.last['tip_trajectory']
+    # Stamped from 0: relative, it starts when it is solved.
+    rig.path_pub.publish(path_msg(points, times, rclpy.time.Time()))
+    assert spin_until(executor, lambda: rig.node.trajectory is not None)
+    assert rig.node.trajectory_start_ns >= now.nanoseconds
+    assert rig.node.problems.unexpected == 0

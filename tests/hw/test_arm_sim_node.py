@@ -5,9 +5,12 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
+from rclpy.time import Time
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
 from inflarm_hw.nodes.arm_sim import ArmSim
+from inflarm_hw.realtime import ElapsedSteps
 from inflarm_model.elastostatics import motor_torques
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, SENSOR_QOS
@@ -99,3 +102,32 @@ def test_inconsistent_parameters_fail_at_startup(ros_context):
     with pytest.raises(ValueError, match='initial_motor_positions_rad'):
         ArmSim(context=ros_context, parameter_overrides=[
             Parameter('initial_motor_positions_rad', value=[0.0, 1.0])])
+
+
+def test_a_late_step_simulates_the_time_that_passed(ros_context):
+    """A host stall of 0.3 s: the next step moves the arm on by 0.3 s, not one period, so it
+    stays with the time-stamped set points (ramped by their velocity) instead of falling behind."""
+    sim = ArmSim(context=ros_context, parameter_overrides=NOISELESS + [
+        Parameter('motor.time_constant_s', value=0.02)])
+    try:
+        clock = [0.0]
+        sim.elapsed = ElapsedSteps(max_step_s=0.5, clock=lambda: clock[0])
+        sim.sim.command(sim.sim.q_m, [0.5, 0.0, 0.0])  # joint_1 ramps at 0.5 rad/s
+        start = sim.sim.time
+        clock[0] = 0.3
+        sim.step()
+        assert sim.sim.time - start == pytest.approx(0.3)
+        assert sim.sim.target[0] == pytest.approx(0.15)
+        clock[0] = 10.0  # a suspended process: at most 0.5 s is simulated
+        sim.step()
+        assert sim.sim.time - start == pytest.approx(0.8)
+        # The controller was not stalled: its set point, stamped 0.3 s after the last step,
+        # is where the target is once the simulator has caught up with that time.
+        stamp = Time(nanoseconds=sim.last_step_ns + 300_000_000)
+        sim.on_command(JointState(header=Header(stamp=stamp.to_msg()), name=['joint_1'],
+                                  position=[0.4], velocity=[0.5]))
+        clock[0] = 10.3
+        sim.step()
+        assert sim.sim.target[0] == pytest.approx(0.4)
+    finally:
+        sim.destroy_node()

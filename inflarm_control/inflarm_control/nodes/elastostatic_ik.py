@@ -2,7 +2,8 @@
 (Fig 6, eqs 8-9 of 000_...): the links' deflection under the tip load is compensated.
 
 A ``tip_target`` is solved at once; a ``tip_trajectory`` (poses stamped with the times they
-are due) is integrated with eq. 9 from the current motor angles. Either is checked whole before
+are due, or from 0 for "from now") is integrated with eq. 9 from the current motor angles; one
+solved late is joined where it is due by then. Either is checked whole before
 anything is commanded: every motor angle within the joint limits, the model's deflected tip
 within ``max_tip_error_m`` of every waypoint (an unreachable path fails here), the path no
 longer than ``max_duration_s``. The set point is streamed at ``command_rate_hz``, interpolated
@@ -245,15 +246,24 @@ class ElastostaticIk(GuardedCallbacks, Node):
                 'tip error', f'the model tip strays {result.tip_error[worst]:.4g} m from '
                 f"waypoint {x_d[worst].round(4).tolist()} at {times[worst]:.3g} s (over "
                 f"max_tip_error_m = {p['max_tip_error_m']} m): out of reach or too fast")
-        # The first waypoint is due at the path's first stamp; late paths start now.
+        # Each waypoint is due at its stamp, as a JointTrajectoryController reads a trajectory:
+        # a path that arrives (or is solved) late is joined where it is due now, so the arm is
+        # not late all along it. Stamps from 0 are relative: the path starts now.
+        now_ns = self.get_clock().now().nanoseconds
+        start_ns = int(stamps[0]) if stamps[0] > 0 else now_ns
+        late_s = (now_ns - start_ns) * 1e-9
+        if late_s >= times[-1]:
+            raise InputError('late', f'the path ended {late_s - times[-1]:.3g} s before it was '
+                                     'solved: nothing of it is due any more')
         self.trajectory = result
         # Eq. 9 was integrated by explicit Euler: each step's motor velocity is its difference.
         self.trajectory_velocity = np.vstack([np.diff(result.q_m, axis=0)
                                               / np.diff(result.times)[:, None], np.zeros(3)])
-        self.trajectory_start_ns = max(int(stamps[0]), self.get_clock().now().nanoseconds)
+        self.trajectory_start_ns = start_ns
         self.get_logger().info(
             f'tip_trajectory of {len(times)} poses over {times[-1]:.2f} s: model tip error '
-            f'at most {result.tip_error.max() * 1000:.3f} mm')
+            f'at most {result.tip_error.max() * 1000:.3f} mm'
+            + (f', joined {late_s:.3f} s late' if late_s > 0.0 else ''))
 
     # -- output --------------------------------------------------------------------------------
 

@@ -5,9 +5,8 @@ takes the latest ball position, runs the three axis controllers and publishes th
 pressures. After ``trial_duration_s`` the trial's outputs become the ILC memory of that target
 (seeding the next ``pid_ilc`` trial to it), a TrialReport is published, and the last pressures
 are held. Without a memory, a ``pid_ilc`` task is seeded from the experiential knowledge database
-(when one is configured). With ``bellows_preload_pa`` > 0 (the default) every bellows pair is
-driven antagonistically around that pressure (``pid_ilc`` module docstring); 0 is the paper's
-quadrant rule.
+(when one is configured). Trials drive the bellows by the paper's quadrant rule, the scheme the
+ILC memories and the knowledge database were learned with.
 
 A planned path (section 4.2) is followed by `inflarm_control.path_following.PathFollower`: a
 reference moving along it at up to ``path.speed_mps`` that waits for the arm (it slows down
@@ -16,6 +15,8 @@ database's holding pressures at the waypoints as feedforward (``knowledge.holdin
 PI alone without a database or where it has no knowledge), and a PI per axis (``path.kp``,
 ``path.ki``) from the pressures held when the path arrives (no jump). After its end the path's
 last waypoint is held, under control, until the next task, path, ``~/stop`` or ``~/vent``.
+While following, every bellows pair is driven antagonistically around ``path.bellows_preload_pa``
+(``pid_ilc`` module docstring): no bellows exhausts as the end crosses an axis.
 
 Subscribes:
     ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m]; a point
@@ -37,7 +38,7 @@ Services (std_srvs/Trigger):
     ~/reset_learning: forget every ILC memory (and the memory file).
 Parameters:
     rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, learning.*, quadrant_bellows,
-        bellows_preload_pa (read-only),
+        path.bellows_preload_pa (read-only),
     path.kp, path.ki (read-only), path.speed_mps, path.slow_error_m, path.stop_error_m,
         path.feedforward_lead_s (read-only),
     trial_duration_s, measurement_timeout_s, reach_tolerance_m,
@@ -103,9 +104,9 @@ PARAMETERS = (
     Parameter('quadrant_bellows', [','.join(pair) for pair in _DEFAULTS.quadrant_bellows],
               "bellows driving x,y in quadrants 1-4 (Fig 4: 'B4,B3', 'B2,B3', 'B2,B1', 'B4,B1')",
               read_only=True),
-    Parameter('bellows_preload_pa', _PATH_DEFAULTS.bellows_preload,
-              "common pressure of each bellows pair, driven antagonistically; 0: the paper's "
-              'quadrant rule [Pa]', range=(0.0, 50e3), read_only=True),
+    Parameter('path.bellows_preload_pa', _PATH_DEFAULTS.bellows_preload,
+              'path following: common pressure of each bellows pair, driven antagonistically '
+              "[Pa]; 0: the paper's quadrant rule", range=(0.0, 50e3), read_only=True),
     Parameter('path.kp', list(_PATH_DEFAULTS.kp), 'path following: proportional gain per axis '
               '[Pa/m]', read_only=True),
     Parameter('path.ki', list(_PATH_DEFAULTS.ki), 'path following: integral gain per axis '
@@ -145,7 +146,7 @@ def path_following_params(p: dict, core: PidIlcParams) -> PathFollowingParams:
     """The path follower's parameters from the node's (``path.*``) and the trials' limits."""
     return PathFollowingParams(
         kp=tuple(p['path.kp']), ki=tuple(p['path.ki']),
-        bellows_preload=p['bellows_preload_pa'], p_max=core.p_max, speed=p['path.speed_mps'],
+        bellows_preload=p['path.bellows_preload_pa'], p_max=core.p_max, speed=p['path.speed_mps'],
         slow_error=p['path.slow_error_m'], stop_error=p['path.stop_error_m'],
         feedforward_lead=p['path.feedforward_lead_s'], workspace=core.workspace)
 
@@ -176,8 +177,7 @@ class PressureController(GuardedCallbacks, Node):
             learning_filter_steps=p['learning.filter_steps'],
             learning_dead_band=p['learning.dead_band_m'],
             learning_feedback_gain=tuple(p['learning.feedback_gain']),
-            quadrant_bellows=tuple(tuple(q.split(',')) for q in p['quadrant_bellows']),
-            bellows_preload=p['bellows_preload_pa'])
+            quadrant_bellows=tuple(tuple(q.split(',')) for q in p['quadrant_bellows']))
         self.controller = PidIlcController(n=1, params=self.core_params)
         self.follower = PathFollower(path_following_params(p, self.core_params))
         self.dt = 1.0 / p['rate_hz']

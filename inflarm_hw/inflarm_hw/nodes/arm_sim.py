@@ -17,7 +17,8 @@ Publishes:
 Parameters:
     arm.* (inflarm_model.nodes.arm_parameters): geometry, stiffness, link pressure.
     tip_force_n (double[3]): external tip load [N], base frame; may change at runtime.
-    rate_hz (double, read-only): simulation and publishing rate.
+    rate_hz (double, read-only): publishing rate; each step simulates the time that passed
+        since the previous one (at most 0.5 s), so a late step does not slow the arm down.
     initial_motor_positions_rad (double[3], read-only).
     motor.time_constant_s, motor.max_velocity_rad_s (double, read-only): motor response.
     noise.position_rad, noise.effort_nm (double): sensor noise.
@@ -43,6 +44,7 @@ from inflarm_hw.nodes.plant_parameters import (
     arm_plant_from_parameters,
     check_arm_plant_parameters,
 )
+from inflarm_hw.realtime import ElapsedSteps
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.ros_conversions import joint_arrays, joint_state
 from inflarm_msgs_json.ros.node import GuardedCallbacks
@@ -62,7 +64,7 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('frame_id', 'base_link', 'base frame', read_only=True),
 )
 MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
-MAX_COMMAND_AGE_S = 0.5  # older set points are applied as if due at the last step
+MAX_COMMAND_AGE_S = 0.5  # a set point is carried to the last step's time by at most this
 
 
 class ArmSim(GuardedCallbacks, Node):
@@ -76,6 +78,9 @@ class ArmSim(GuardedCallbacks, Node):
         seed = p['seed']
         self.sim = arm_plant_from_parameters(p, np.random.default_rng(None if seed < 0 else seed))
         self.dt = 1.0 / p['rate_hz']
+        # Step by the time that passed, not the timer's period: a late callback (a stalled
+        # host) must not leave the arm behind the IK's time-stamped set points.
+        self.elapsed = ElapsedSteps(max_step_s=MAX_COMMAND_AGE_S)
         self.last_command_time: float | None = None  # steady clock; None: holding
         self.last_step_ns = self.get_clock().now().nanoseconds  # node clock of the last step
 
@@ -112,10 +117,12 @@ class ArmSim(GuardedCallbacks, Node):
             target[MOTORS.index(name)] = arrays['position'][k]
             if arrays['velocity'] is not None:
                 feed_forward[MOTORS.index(name)] = arrays['velocity'][k]
-        # The set point is due at its stamp; the next step carries it on by one step from the
-        # last one, so start it where it stood then (a stamp of 0: due now).
+        # The set point is due at its stamp; the next step carries it on from the last one's
+        # time, so start it where it stood then (a stamp of 0: due now). A stamp after the last
+        # step (this simulator late, the controller not) is carried back.
         stamp_ns = Time.from_msg(msg.header.stamp).nanoseconds or self.last_step_ns
-        age = min(max((self.last_step_ns - stamp_ns) * 1e-9, -self.dt), MAX_COMMAND_AGE_S)
+        age = float(np.clip((self.last_step_ns - stamp_ns) * 1e-9, -MAX_COMMAND_AGE_S,
+                            MAX_COMMAND_AGE_S))
         self.sim.command(target + feed_forward * age, feed_forward)
         self.last_command_time = time.monotonic()
 
@@ -127,8 +134,11 @@ class ArmSim(GuardedCallbacks, Node):
             self.sim.command(self.sim.q_m)
             self.get_logger().warning(
                 f'no motor_position_command for {timeout} s: holding the motors where they are')
+        dt = self.elapsed()
+        if dt <= 0.0:
+            return
         try:
-            state = self.sim.step(self.dt)
+            state = self.sim.step(dt)
         except RuntimeError as err:  # no equilibrium: hold the last state, say why
             self.problems.warn('step', str(err))
             return
