@@ -66,8 +66,13 @@ published after the link status recorded just after them, in one run; 4 of 4 bef
 another). The replay (``order='after'``) puts it after the firing; ``order='before'`` puts
 every ambiguous input before its firing; the command runs both and a recorded timer output
 matches when within tolerance of either. Unstamped inputs (``control_task``) go at their
-record time: there is nothing to tell their order by (measured: a task recorded 0.07 ms before
-the first trial step had been taken in before it).
+record time, and in the ``order='before'`` replay to the other side of a due time of their
+node's timers less than ``UNSTAMPED_ORDER_NS`` (2 ms) from it: there is nothing to tell their
+order by (measured: a task recorded 0.07 ms before the first trial step had been taken in
+before it; one recorded 1.5 ms before a firing that published nothing, after it). Such a
+firing is on the grid worked back from the node's first output, so its due time is itself
+uncertain by the timer's jitter (a few ms on a loaded machine); the window does not cover
+that.
 
 Start-up: the first ``--skip-start-s`` (default 1.0 s) after each node's first recorded output
 is not compared (as ``ros2 bag play --start-offset`` skips): measured, the estimator's first
@@ -129,6 +134,7 @@ __all__ = [
     'NODES',
     'NOT_COMPARED',
     'SKIP_START_S',
+    'UNSTAMPED_ORDER_NS',
     'NodeIo',
     'Replay',
     'TimerSchedule',
@@ -163,6 +169,12 @@ NOT_COMPARED = frozenset({'/diagnostics'})
 #: before an output the node had published before taking them in; 3 ms and more before one it
 #: published after).
 RECORD_ORDER_NS = 1_000_000
+#: An unstamped input (``control_task``) recorded less than this from a due time of a timer of
+#: the node that takes it [ns] goes to the other side of that firing in the other-order replay
+#: (``order='before'``): record-time order across topics is not reliable below it (measured:
+#: 0.06-1.5 ms between an input and a firing the node had in the other order), and a firing
+#: that published nothing is only on the grid worked back from the node's next output.
+UNSTAMPED_ORDER_NS = 2_000_000
 #: The start-up not compared by default [s]: from each node's first recorded output.
 SKIP_START_S = 1.0
 # Burst grouping and grid test of `timer_phase`.
@@ -455,7 +467,9 @@ def retime_inputs(inputs: Sequence[BagMessage], subscribers: Mapping[str, Sequen
     time, and in the topic's order). So a node that lagged behind its inputs in the recording
     (e.g. load_estimator on a loaded machine) lags alike in the replay, and its timers see the
     inputs it had seen. An input that would reach a node less than `RECORD_ORDER_NS` before
-    one of ``firings[node]`` reaches it 1 ns after that firing instead.
+    one of ``firings[node]`` reaches it 1 ns after that firing instead. An unstamped input
+    (no header) less than `UNSTAMPED_ORDER_NS` from the nearest of ``firings[node]`` goes to
+    the other side of it with ``order='before'`` (at its record time otherwise).
 
     Parameters
     ----------
@@ -471,7 +485,8 @@ def retime_inputs(inputs: Sequence[BagMessage], subscribers: Mapping[str, Sequen
         Where an input goes that is ambiguous, its node's output recorded less than
         `RECORD_ORDER_NS` from one of the node's firings: ``'after'`` (the default, what
         was measured most often) that firing when recorded just before it, ``'before'`` it
-        when recorded just before or just after it (the other order, `regression`).
+        when recorded just before or just after it (the other order, `regression`); with
+        ``'before'``, an unstamped input near a firing also goes to its other side.
 
     Returns
     -------
@@ -487,14 +502,25 @@ def retime_inputs(inputs: Sequence[BagMessage], subscribers: Mapping[str, Sequen
             when = m.timestamp_ns
             done = consumed.get((node, m.topic))
             stamp = _stamp_of(m) if done else None
+            fired = (firings or {}).get(node, ())
             if stamp is not None and stamp in done:
                 when = max(when, done[stamp] - 1)
                 # Both are outputs of the node, recorded in the recorder's order.
-                fired = (firings or {}).get(node, ())
                 k = bisect.bisect_left(fired, when)
                 if order == 'after' and k < len(fired) and fired[k] - when < RECORD_ORDER_NS:
                     when = fired[k] + 1
                 elif order == 'before' and k > 0 and when - fired[k - 1] < RECORD_ORDER_NS:
+                    when = fired[k - 1] - 1
+            elif order == 'before' and fired and _stamp_of(m) is None:
+                # Unstamped: at its record time, or in the other replay on the other side of a
+                # due time within UNSTAMPED_ORDER_NS (the nearest one).
+                k = bisect.bisect_left(fired, when)
+                ahead = fired[k] - when if k < len(fired) else None
+                behind = when - fired[k - 1] if k > 0 else None
+                if ahead is not None and ahead < UNSTAMPED_ORDER_NS and (
+                        behind is None or ahead <= behind):
+                    when = fired[k] + 1
+                elif behind is not None and behind < UNSTAMPED_ORDER_NS:
                     when = fired[k - 1] - 1
             when = max(when, last.get((node, m.topic), when))
             last[(node, m.topic)] = when

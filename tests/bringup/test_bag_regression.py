@@ -1,6 +1,7 @@
 """inflarm-bag-regression: a simulated run recorded with bag_recorder (real processes over real
-DDS) replays within tolerance, identically twice, fails on a changed parameter naming the topic,
-and rejects a bag without the topics the nodes need."""
+DDS) replays within tolerance, identically twice, and so does it with its task moved to just
+before an idle controller firing; it fails on a changed parameter naming the topic, and rejects a
+bag without the topics the nodes need."""
 
 import pathlib
 import signal
@@ -20,8 +21,9 @@ from inflarm_bringup.bag_regression import (
     main,
     regression,
     replay,
+    retime_inputs,
 )
-from inflarm_hw.bag import BagWriter, bag_info, read_messages
+from inflarm_hw.bag import BagMessage, BagWriter, bag_info, read_messages, serialize, typestore
 from inflarm_msgs_json import ControlTask, TrialReport, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
@@ -206,6 +208,46 @@ def _installed_arm_parameters() -> dict:
     from ament_index_python.packages import get_package_share_directory
     arm_yaml = pathlib.Path(get_package_share_directory(ARM_CONFIG[0]), 'config', ARM_CONFIG[1])
     return yaml.safe_load(arm_yaml.read_text())['/**']['ros__parameters']
+
+
+def test_a_task_recorded_just_before_an_idle_firing_replays_within_tolerance(recorded, tmp_path,
+                                                                          capsys):
+    # The flake this covers, made certain: the run's control_task moved to 1.5 ms before the
+    # controller's idle firing one step before its first command (a firing that published
+    # nothing: on the grid worked back from that command). The node took the task after it;
+    # the other-order replay delivers it there.
+    bag, params_file = recorded
+    info = bag_info(bag)
+    first = next(read_messages(bag, ['/chamber_pressure_command'])).timestamp_ns
+    moved = first - 1 - round(0.2e9) - 1_500_000
+    early = tmp_path / 'early_task'
+    with BagWriter(early) as writer:
+        for topic, topic_info in sorted(info.topics.items()):
+            writer.add_topic(topic, topic_info.msgtype, topic_info.offered_qos)
+        for m in sorted(read_messages(bag, sorted(info.topics)), key=lambda m: (
+                moved if m.topic == '/control_task' else m.timestamp_ns)):
+            writer.write(m.topic, moved if m.topic == '/control_task' else m.timestamp_ns,
+                         m.data)
+    code = main([str(early), '--params-file', str(params_file)])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    assert f'PASS: {len(OUTPUTS)} topics within tolerance' in printed
+
+
+def test_an_unstamped_input_near_a_firing_goes_to_its_other_side_in_the_other_order():
+    # Tasks 1.5 ms before, 1.5 ms after and 3 ms before a controller firing (due at 1 s, 2 s,
+    # 3 s): at their record times, and in the other-order replay across the first two firings.
+    string = typestore().types['std_msgs/msg/String']
+    data = serialize(string(data='{}'), 'std_msgs/msg/String')
+    times = [998_500_000, 2_001_500_000, 2_997_000_000]
+    tasks = [BagMessage('/control_task', 'std_msgs/msg/String', t, data) for t in times]
+    subscribers = {'/control_task': ['pressure_controller']}
+    firings = {'pressure_controller': [1_000_000_000, 2_000_000_000, 3_000_000_000]}
+    for order, expected in (('after', times),
+                            ('before', [1_000_000_001, 1_999_999_999, 2_997_000_000])):
+        delivered = retime_inputs(tasks, subscribers, {}, firings, order)
+        assert [m.timestamp_ns for m, _ in delivered] == expected, order
+        assert all(nodes == ('pressure_controller',) for _, nodes in delivered)
 
 
 def test_a_bag_without_the_needed_topics_is_rejected_with_what_is_missing(tmp_path, capsys):
