@@ -48,8 +48,10 @@ from inflarm_bringup.systems import Backend, system_nodes
 
 SOFT_START = (0.0, 0.130, 0.710)  # the paper's start and goal [m], sra_mount
 SOFT_GOAL = (0.130, 0.0, 0.730)
+TASK_RETRY_S = 2.0  # the task to the start is sent again after this long without a command
 NEAR_START_M = 0.015  # the trial to the start hands over to path following this close
-ARRIVAL_TOLERANCE_M = 0.004  # at the start or the goal when the measured end is this close
+AT_START_M = 0.0025  # the path to the goal starts once the measured end is this close
+ARRIVAL_TOLERANCE_M = 0.004  # at the goal when the measured end is this close
 TRACKING_TARGET_M = 0.005  # the paper: "an error smaller than 5 mm"
 ARM_LOAD_N = (0.0, 10.0, -15.0)  # the sample load of section 4 of 000 [N], base frame
 ARM_PATH_END = (0.80, 0.30, 0.10)  # the other end of the tip's path [m], base frame
@@ -110,7 +112,13 @@ def mission_node_class():
     from inflarm_msgs_json import ControlTask, LinkStatus, ObstacleSet, PlanRequest, decode
     from inflarm_msgs_json.ros.conversions import to_string_msg
     from inflarm_msgs_json.ros.node import GuardedCallbacks
-    from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS
+    from inflarm_msgs_json.ros.qos import (
+        COMMAND_QOS,
+        JOINT_STATE_QOS,
+        LATCHED_QOS,
+        RELIABLE_QOS,
+        SENSOR_QOS,
+    )
     from inflarm_planning.scenario import ALERT_MARGIN, OBSTACLE
 
     def seconds(stamp) -> float:
@@ -138,6 +146,7 @@ def mission_node_class():
             self.soft_phase, self.soft_since = 'waiting for the camera', time.monotonic()
             self.arm_phase, self.arm_since = 'waiting for an estimate', time.monotonic()
             self.soft_times: dict[str, float] = {}
+            self.pressure_commands = 0  # seen from the controller
             self.arm_traverses = 0
             for topic, kind, callback, qos in (
                     ('ball_position', PointStamped, self.on_ball, SENSOR_QOS),
@@ -147,7 +156,8 @@ def mission_node_class():
                     ('estimated_wrench', WrenchStamped, self.on_wrench, RELIABLE_QOS),
                     ('estimated_joint_states', JointState, self.on_pose, JOINT_STATE_QOS),
                     ('joint_states', JointState, self.on_joint_states, JOINT_STATE_QOS),
-                    ('link_status', String, self.on_link_status, RELIABLE_QOS)):
+                    ('link_status', String, self.on_link_status, RELIABLE_QOS),
+                    ('chamber_pressure_command', String, self.on_pressure_command, COMMAND_QOS)):
                 self.create_guarded_subscription(kind, topic, callback, qos)
             self.task_pub = self.create_publisher(String, 'control_task', RELIABLE_QOS)
             self.obstacles_pub = self.create_publisher(String, 'obstacles', LATCHED_QOS)
@@ -210,6 +220,9 @@ def mission_node_class():
                 self.motors.append((seconds(msg.header.stamp),
                                     [msg.position[list(msg.name).index(n)] for n in names]))
 
+        def on_pressure_command(self, msg) -> None:
+            self.pressure_commands += 1
+
         def on_link_status(self, msg) -> None:
             status = decode(msg.data, LinkStatus)
             self.link_moments[status.link] = max(self.link_moments.get(status.link, 0.0),
@@ -233,10 +246,14 @@ def mission_node_class():
 
         def step_soft(self) -> None:
             latest = self.ball.values[-1] if self.ball.values else None
-            if self.soft_phase == 'waiting for the camera' and latest is not None \
-                    and self.connected(self.task_pub, self.obstacles_pub, self.request_pub):
+            first = (self.soft_phase == 'waiting for the camera' and latest is not None
+                     and self.connected(self.task_pub, self.obstacles_pub, self.request_pub))
+            again = (self.soft_phase == 'moving to the start' and not self.pressure_commands
+                     and time.monotonic() - self.soft_since > TASK_RETRY_S)
+            if first or again:
                 # The paper's way to a new target: a PID + ILC trial seeded by the knowledge
-                # database (section 3.2), the obstacle far from this move.
+                # database (section 3.2), the obstacle far from this move. Sent again while no
+                # command comes: the controller refuses a task before its first ball position.
                 self.task_pub.publish(self.to_string_msg(self.ControlTask(
                     'sra_mount', SOFT_START, 'pid_ilc', 0)))
                 self.enter('soft', 'moving to the start')
@@ -248,7 +265,7 @@ def mission_node_class():
                 self.request_plan(latest, SOFT_START)
                 self.enter('soft', 'settling at the start')
             elif self.soft_phase == 'settling at the start' and self.plan_to(SOFT_START) \
-                    and np.linalg.norm(np.subtract(latest, SOFT_START)) < ARRIVAL_TOLERANCE_M:
+                    and np.linalg.norm(np.subtract(latest, SOFT_START)) < AT_START_M:
                 self.request_plan(SOFT_START, SOFT_GOAL)
                 self.enter('soft', 'planning')
             elif self.soft_phase == 'planning' and self.plan_to(SOFT_GOAL):

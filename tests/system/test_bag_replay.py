@@ -51,8 +51,19 @@ def test_a_recorded_run_gives_the_simulated_load_offline_and_when_replayed(
 
     info = bag_info(bag)  # the SIGINT-stopped recorder left a complete bag
     recorded = info.topics['/joint_states'].message_count
-    assert recorded >= RECORDED_SAMPLES - 10, info
-    assert info.topics['/tip_position_truth'].message_count >= RECORDED_SAMPLES - 10, info
+    # Nothing the recorder received is lost: every sample the probe saw between the bag's first
+    # and last one is in it (best effort on both sides: a few may drop), however long its
+    # subscription took to match arm_sim's publisher after 'recording'.
+    def ns(stamp) -> int:
+        return stamp.sec * 10**9 + stamp.nanosec
+
+    stamps = [ns(deserialize(r.data, r.msgtype).header.stamp)
+              for r in read_messages(bag, ['joint_states'])]
+    seen = [ns(m.header.stamp) for m in joints]
+    expected = [t for t in seen if stamps[0] <= t <= stamps[-1]]
+    assert recorded >= RECORDED_SAMPLES // 2, info
+    assert len(set(expected) - set(stamps)) <= 3, (len(expected), recorded)
+    assert info.topics['/tip_position_truth'].message_count >= RECORDED_SAMPLES // 2, info
 
     # (a) Offline: inflarm-estimate-bag recovers the simulated load and the true tip.
     csv_path = tmp_path / 'estimates.csv'
