@@ -119,6 +119,17 @@ def remove_wakeup(callback: Callable[[], None]) -> None:
             _wakeups.remove(callback)
 
 
+def _drop_interrupted_startup(hook: Callable) -> Callable:
+    """``sys.unraisablehook`` that stays quiet about a `StartupInterrupted` which landed where
+    it cannot propagate (a C extension's callback, e.g. scipy's Sobol table loading, reports it as
+    "Exception ignored in ..."): the stop request is kept, and the entry point exits once the
+    import returns."""
+    def unraisable(info) -> None:
+        if not isinstance(info.exc_value, StartupInterrupted):
+            hook(info)
+    return unraisable
+
+
 def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
     """A console-script entry point that owns the stop signals before it imports ``module``.
 
@@ -128,6 +139,8 @@ def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
     def entry() -> None:
         global _abort_startup
         _abort_startup = True
+        previous_hook = sys.unraisablehook
+        sys.unraisablehook = _drop_interrupted_startup(previous_hook)
         try:
             install_stop_handlers()
             main = getattr(importlib.import_module(module), function)
@@ -140,6 +153,7 @@ def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
             raise
         finally:
             _abort_startup = False
+            sys.unraisablehook = previous_hook
         if stop_requested():
             sys.exit(0)
         main()
