@@ -10,7 +10,8 @@ and runs the two missions side by side:
   scenario's region (1 cm grid, 30 learning trials a point, on the simulated plant) is built
   first; seeded by it, a PID + ILC trial brings the camera-tracked end near the paper's start
   (0, 130, 710) mm; the obstacle of Fig 10 (x 35-140, y 40-140, z 650-780 mm) is published with
-  its alert region; a short planned path settles the end on the start, then a plan to the goal
+  its alert region; a short planned path settles the end on the start (switching the bellows to
+  their antagonistic preload moves it), and once it has stayed there a plan to the goal
   (130, 0, 730) mm is requested; the pressure controller follows each planned path
   (``inflarm_control.path_following``: a reference moving along it that waits for the arm, the
   knowledge's holding pressures as feedforward, a PI per axis, the bellows pairs driven
@@ -45,12 +46,14 @@ import numpy as np
 
 from inflarm_bringup.processes import NodeProcess, ProcessGroup, ros_environment
 from inflarm_bringup.systems import Backend, system_nodes
+from inflarm_control.path_following import project_on_polyline
 
 SOFT_START = (0.0, 0.130, 0.710)  # the paper's start and goal [m], sra_mount
 SOFT_GOAL = (0.130, 0.0, 0.730)
 TASK_RETRY_S = 2.0  # the task to the start is sent again after this long without a command
 NEAR_START_M = 0.015  # the trial to the start hands over to path following this close
-AT_START_M = 0.004  # the path to the goal starts once the measured end is this close
+AT_START_M = 0.004  # the path to the goal starts once the measured end is this close,
+SETTLE_S = 2.0  # on average over this long (its depth is noisy), and none of it twice as far
 ARRIVAL_TOLERANCE_M = 0.004  # at the goal when the measured end is this close
 TRACKING_TARGET_M = 0.005  # the paper: "an error smaller than 5 mm"
 ARM_LOAD_N = (0.0, 10.0, -15.0)  # the sample load of section 4 of 000 [N], base frame
@@ -69,16 +72,6 @@ RECORDED_TOPICS = (
     'tip_position_truth', 'tip_trajectory', 'motor_position_command', 'link_status',
     'robot_description',
 )
-
-
-def distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
-    """Distance of each point (N, 3) to the polyline (M, 3), M >= 2 [m]."""
-    a, b = polyline[:-1], polyline[1:]
-    ab = b - a
-    t = np.einsum('nmi,mi->nm', points[:, None, :] - a[None], ab) / np.maximum(
-        np.einsum('mi,mi->m', ab, ab), 1e-18)
-    closest = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]
-    return np.linalg.norm(points[:, None, :] - closest, axis=-1).min(axis=1)
 
 
 @dataclass
@@ -265,7 +258,7 @@ def mission_node_class():
                 self.request_plan(latest, SOFT_START)
                 self.enter('soft', 'settling at the start')
             elif self.soft_phase == 'settling at the start' and self.plan_to(SOFT_START) \
-                    and np.linalg.norm(np.subtract(latest, SOFT_START)) < AT_START_M:
+                    and self.settled_at(SOFT_START):
                 self.request_plan(SOFT_START, SOFT_GOAL)
                 self.enter('soft', 'planning')
             elif self.soft_phase == 'planning' and self.plan_to(SOFT_GOAL):
@@ -291,6 +284,19 @@ def mission_node_class():
                 else:  # back, from where the tip is
                     self.send_tip_path(np.array(self.tip_truth.values[-1]), self.arm_start)
                     self.enter('arm', 'traverse 2 of 2')
+
+        def settled_at(self, point) -> bool:
+            """Whether the measured end has rested at ``point`` for the last `SETTLE_S` of
+            this phase: its mean within `AT_START_M`, no sample twice as far. (One sample near
+            it is not enough: switching to the path follower's bellows preload first moves the
+            end by up to 15 mm, and a path begun then starts with that error.)"""
+            now = self.now()
+            if now - self.soft_times[self.soft_phase] < SETTLE_S:
+                return False
+            _, recent = self.ball.arrays(now - SETTLE_S)
+            offsets = np.linalg.norm(recent - np.asarray(point), axis=1)
+            return bool(len(recent) and np.linalg.norm(recent.mean(axis=0) - point) < AT_START_M
+                        and offsets.max() < 2.0 * AT_START_M)
 
         def request_plan(self, start, goal) -> None:
             self.request_pub.publish(self.to_string_msg(self.PlanRequest(
@@ -344,6 +350,14 @@ class Figures:
     link_rows: list = field(default_factory=list)  # (link, moment, Mw, pressure, required)
 
 
+def tip_off_path(mission, due: np.ndarray, points: np.ndarray, margin_s: float):
+    """Times and distances of the true tip to one sent tip path (the straight line, not the
+    point due at that time: a late command shifts the tip along the line, which is no error of
+    the deflection compensation), from ``margin_s`` before the path is due to as long after."""
+    t, tips = mission.tip_truth.arrays(due[0] - margin_s, due[-1] + margin_s)
+    return t, project_on_polyline(tips, points)[0]
+
+
 def measure(mission) -> Figures:
     from inflarm_model.link import min_pressure_for_moment
     from inflarm_planning.collision import arm_collides, box_array
@@ -355,7 +369,7 @@ def measure(mission) -> Figures:
         stop = times.get('at the goal', mission.now())
         _, driven = mission.soft_truth.arrays(times['following the path'], stop)
         if len(driven):
-            errors = distance_to_polyline(driven, mission.planned)
+            errors = project_on_polyline(driven, mission.planned)[0]
             figures.soft_error_max = float(errors.max())
             figures.soft_error_rms = float(np.sqrt(np.mean(errors**2)))
             figures.soft_clearance = float(end_clearance(driven).min())
@@ -371,12 +385,8 @@ def measure(mission) -> Figures:
             figures.arm_load = tuple(mean)
             figures.arm_load_error = float(np.linalg.norm(mean - ARM_LOAD_N)
                                            / np.linalg.norm(ARM_LOAD_N))
-        errors = []
-        for due, points in mission.arm_paths:
-            t, tips = mission.tip_truth.arrays(due[0], due[-1])
-            reference = np.stack([np.interp(t, due, points[:, i]) for i in range(3)], axis=1)
-            errors.append(np.linalg.norm(tips - reference, axis=1))
-        errors = np.concatenate(errors) if errors else np.array([])
+        errors = np.concatenate([tip_off_path(mission, due, points, 0.0)[1]
+                                 for due, points in mission.arm_paths])
         if errors.size:
             figures.arm_tip_error_max = float(errors.max())
             figures.arm_tip_error_rms = float(np.sqrt(np.mean(errors**2)))
@@ -481,12 +491,12 @@ def plot(mission, figures: Figures, out: pathlib.Path) -> list[pathlib.Path]:
         origin = mission.arm_paths[0][0][0]
         for due, points in mission.arm_paths:
             t, tips = mission.tip_truth.arrays(due[0] - 0.5, due[-1] + 0.5)
-            reference = np.stack([np.interp(t, due, points[:, i]) for i in range(3)], axis=1)
             for i, name in enumerate('xyz'):
                 top.plot(t - origin, tips[:, i], color=f'C{i}', label=f'true tip {name}'
                          if due is mission.arm_paths[0][0] else None)
                 top.plot(due - origin, points[:, i], 'k--', lw=0.8)
-            bottom.plot(t - origin, np.linalg.norm(tips - reference, axis=1) * 1000, 'r-')
+            t, errors = tip_off_path(mission, due, points, 0.5)
+            bottom.plot(t - origin, errors * 1000, 'r-')
         bottom.axhline(ARM_TIP_TARGET_M * 1000, color='tab:blue', label='2 mm')
         top.set_ylabel('tip [m]'), top.legend(fontsize=8)
         bottom.set_ylabel('off the path [mm]'), bottom.set_xlabel('time [s]')

@@ -7,9 +7,13 @@ import sys
 import numpy as np
 import pytest
 
-from inflarm_bringup.demo import distance_to_polyline
 from inflarm_control.knowledge import KnowledgeGrid, build_knowledge_database, holding_pressure
-from inflarm_control.path_following import PathFollower, PathFollowingParams
+from inflarm_control.path_following import (
+    PathFollower,
+    PathFollowingParams,
+    project_on_polyline,
+    shrink_lateral_outputs,
+)
 from inflarm_control.pid_ilc import (
     PidIlcController,
     PidIlcParams,
@@ -93,6 +97,22 @@ def test_params_are_validated():
         PathFollowingParams(speed=0.0)
     with pytest.raises(ValueError, match='bellows_preload'):
         PathFollowingParams(bellows_preload=-1.0)
+    with pytest.raises(ValueError, match='feedforward_dead_zone >= 0'):
+        PathFollowingParams(feedforward_dead_zone=-1.0)
+
+
+def test_the_feedforward_loses_the_dead_zone_on_x_and_y_only():
+    u = np.array([[10e3, -6e3, 20e3], [3e3, -1e3, 2e3], [-4e3, 4e3, 0.0]])
+    np.testing.assert_allclose(shrink_lateral_outputs(u, 4e3),
+                               [[6e3, -2e3, 20e3], [0.0, 0.0, 2e3], [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(shrink_lateral_outputs(u, 0.0), u)
+    with pytest.raises(ValueError, match=r'outputs of shape \(\.\.\., 3\)'):
+        shrink_lateral_outputs(np.zeros(5), 4e3)
+    # the follower starts from the held pressures whatever the feedforward: no jump
+    follower = PathFollower()
+    held = antagonistic_pressures([9e3, -5e3, 20e3], 6e3)
+    follower.start([START, GOAL], START, held, [held, held])
+    np.testing.assert_allclose(follower.step(START, DT), held, atol=1e-6)
 
 
 def test_start_and_step_reject_bad_input():
@@ -128,6 +148,22 @@ def test_the_first_command_continues_the_held_pressures_and_a_dropout_holds():
     assert follower.progress == progress and moved[0] < held[0]
     np.testing.assert_array_equal(follower.step(off, DT, valid=False), moved)
     assert follower.progress == progress
+
+
+def test_the_reference_starts_at_the_path_point_nearest_to_the_end():
+    # a path planned from where the end was, arriving after a trial moved it on (seen in the
+    # demo: the reference waited at the stale start, out of the arm's reach, for ever)
+    path = np.array([[-0.0024, 0.1353, 0.698], [-0.0008, 0.1318, 0.706], [0.0, 0.130, 0.710]])
+    follower = PathFollower()
+    held = antagonistic_pressures([0.0, 44e3, 16e3], 6e3)
+    end = np.array([-0.0018, 0.1347, 0.7104])
+    follower.start(path, end, held)
+    nearest = follower.reference
+    assert np.linalg.norm(nearest - end) < np.linalg.norm(path[0] - end) - 0.005
+    assert follower.progress > 0.5 * follower.length
+    np.testing.assert_allclose(follower.step(end, DT), held, atol=1e3)  # no jump
+    follower.start(path, path[0], held)
+    assert follower.progress == 0.0
 
 
 def test_the_reference_reaches_the_end_and_the_last_waypoint_is_held():
@@ -193,13 +229,23 @@ def follow_scenario(path, feedforward, seed):
 def test_the_scenario_path_is_followed_within_5_mm(knowledge, scenario_path, seed):
     feedforward = np.array([holding_pressure(knowledge, w) for w in scenario_path])
     truth, duration = follow_scenario(scenario_path, feedforward, seed)
-    error = distance_to_polyline(truth, scenario_path)
+    error = project_on_polyline(truth, scenario_path)[0]
     assert np.linalg.norm(truth[-1] - scenario_path[-1]) < 0.002, truth[-1]
-    assert error.max() < 0.0045, (error.max(), truth[np.argmax(error)])
+    assert error.max() < 0.0035, (error.max(), truth[np.argmax(error)])
     assert np.sqrt(np.mean(error**2)) < 0.002
-    assert duration < 120.0  # the planner's 50 s at 5 mm/s, slowed where the arm lags
+    assert duration < 110.0  # the planner's 50 s at 5 mm/s, slowed where the arm lags
 
 
 def test_without_a_database_the_pi_alone_follows_within_5_mm(scenario_path):
     truth, _ = follow_scenario(scenario_path, None, 7)
-    assert distance_to_polyline(truth, scenario_path).max() < 0.0045
+    assert project_on_polyline(truth, scenario_path)[0].max() < 0.0045
+
+
+def test_points_project_onto_a_polyline_with_their_distance_and_arc_length():
+    polyline = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 2.0, 0.0]])
+    points = np.array([[0.5, 0.3, 0.0], [2.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [1.0, 3.0, 4.0]])
+    distances, arcs = project_on_polyline(points, polyline)
+    np.testing.assert_allclose(distances, [0.3, 1.0, 1.0, np.sqrt(17.0)])
+    np.testing.assert_allclose(arcs, [0.5, 2.0, 0.0, 3.0])
+    with pytest.raises(ValueError, match=r'polyline of shape \(M, 3\), M >= 2'):
+        project_on_polyline(points, polyline[:1])

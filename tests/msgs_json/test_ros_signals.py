@@ -1,6 +1,7 @@
-"""A stop request during a node's start-up imports: the process exits 0 at once and quietly,
-even where the request lands in code that cannot raise it."""
+"""A stop request during a node's start-up (its imports, the building of its nodes): the process
+exits 0 at once and quietly, even where the request lands in code that cannot raise it."""
 
+import os
 import subprocess
 import sys
 
@@ -29,3 +30,35 @@ def test_a_stop_request_that_lands_where_it_cannot_raise_still_stops_quietly(tmp
     assert run.returncode == 0, run.stderr
     assert 'main ran' not in run.stdout  # the stop request was kept
     assert 'Exception ignored' not in run.stderr and 'Traceback' not in run.stderr, run.stderr
+
+
+# A node whose construction takes long (sim_mcu's camera renderer took seconds on a loaded
+# machine, the interrupt stress test's slowest exit) and is stopped in the middle of it.
+SLOW_NODE = """
+import os, signal, time
+from rclpy.node import Node
+from inflarm_msgs_json.ros.spin import spin_node
+class SlowToBuild(Node):
+    def __init__(self):
+        super().__init__('slow_to_build')
+        self.create_publisher(__import__('std_msgs.msg').msg.String, 'chatter', 10)
+        os.kill(os.getpid(), signal.SIGTERM)
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline:  # a long build, in Python
+            pass
+        print('built')
+def main():
+    spin_node(SlowToBuild, [])
+"""
+
+
+def test_a_stop_request_while_a_node_is_built_stops_it_at_once(tmp_path, domain_id):
+    (tmp_path / 'slow_node.py').write_text(SLOW_NODE)
+    code = ('import sys; sys.path.insert(0, sys.argv[1]); '
+            'from inflarm_msgs_json.ros.signals import node_entry; node_entry("slow_node")()')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id))
+    run = subprocess.run([sys.executable, '-c', code, str(tmp_path)], capture_output=True,
+                         text=True, timeout=40, env=env)  # the build alone would take 60 s
+    assert run.returncode == 0, run.stderr
+    assert 'built' not in run.stdout
+    assert 'Traceback' not in run.stderr and 'Warning' not in run.stderr, run.stderr

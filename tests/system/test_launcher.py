@@ -75,3 +75,24 @@ def test_rviz_is_refused_in_process(capsys):
         launcher.main(['sim', '--rviz', '--in-process'])
     assert exited.value.code == 2
     assert 'not with --in-process' in capsys.readouterr().err
+
+
+def test_the_group_stops_its_children_one_at_a_time_the_last_started_first(capsys):
+    # Fast DDS busy-waits when a participant is deleted while others leave (ProcessGroup.stop).
+    output = io.StringIO()
+    group = ProcessGroup(dict(os.environ), output=output)
+    child = ('import signal, sys, time; name = sys.argv[1]; stopped = []; '
+             'signal.signal(signal.SIGINT, lambda *_: stopped.append(1)); '
+             'signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT}); '
+             "print('ready', flush=True)\n"
+             'while not stopped: time.sleep(0.01)\n'
+             "print('stopping', name, flush=True); time.sleep(0.3)\n"
+             "print('gone', name, flush=True)")
+    for name in ('first', 'second', 'third'):
+        group.start(name, [sys.executable, '-c', child, name])
+    assert wait_until(lambda: all('ready' in group.last_lines[n] for n in group.processes), 20.0)
+    assert group.stop(grace_s=5.0) == {'first': 0, 'second': 0, 'third': 0}
+    events = [line.split('] ', 1)[1] for line in output.getvalue().splitlines()
+              if 'stopping' in line or 'gone' in line]
+    assert events == ['stopping third', 'gone third', 'stopping second', 'gone second',
+                      'stopping first', 'gone first']

@@ -40,7 +40,7 @@ Parameters:
     rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, learning.*, quadrant_bellows,
         path.bellows_preload_pa (read-only),
     path.kp, path.ki (read-only), path.speed_mps, path.slow_error_m, path.stop_error_m,
-        path.feedforward_lead_s (read-only),
+        path.feedforward_lead_s, path.feedforward_dead_zone_pa (read-only),
     trial_duration_s, measurement_timeout_s, reach_tolerance_m,
     workspace_margin_m, max_waypoints, ilc_memory_path, knowledge_db_path (read-only),
     frame_id (read-only).
@@ -123,6 +123,10 @@ PARAMETERS = (
     Parameter('path.feedforward_lead_s', _PATH_DEFAULTS.feedforward_lead,
               'the feedforward is taken this far ahead of the reference [s]',
               range=(0.0, 10.0), read_only=True),
+    Parameter('path.feedforward_dead_zone_pa', _PATH_DEFAULTS.feedforward_dead_zone,
+              "the knowledge's x and y holding outputs shrink by this much: the valves' dead "
+              'zone, which the preloaded bellows never enter [Pa]',
+              range=(0.0, 50e3), read_only=True),
     Parameter('trial_duration_s', 20.0, 'length of a trial [s]', range=(1.0, 600.0)),
     Parameter('measurement_timeout_s', 0.5,
               'a ball position older than this is a vision dropout: hold, do not learn [s]',
@@ -148,7 +152,8 @@ def path_following_params(p: dict, core: PidIlcParams) -> PathFollowingParams:
         kp=tuple(p['path.kp']), ki=tuple(p['path.ki']),
         bellows_preload=p['path.bellows_preload_pa'], p_max=core.p_max, speed=p['path.speed_mps'],
         slow_error=p['path.slow_error_m'], stop_error=p['path.stop_error_m'],
-        feedforward_lead=p['path.feedforward_lead_s'], workspace=core.workspace)
+        feedforward_lead=p['path.feedforward_lead_s'],
+        feedforward_dead_zone=p['path.feedforward_dead_zone_pa'], workspace=core.workspace)
 
 
 def task_key(target: np.ndarray) -> tuple[int, int, int]:

@@ -9,8 +9,8 @@ node's modules import is lost or ends in a traceback. Instead, every node execut
    then unblocks SIGINT and SIGTERM -- a parent that must not lose a stop request starts its
    children with both blocked (see ``inflarm_bringup.processes``), so one sent before the
    handlers exist waits for them instead of killing the interpreter;
-2. while it imports its node module, a stop request aborts the import (`StartupInterrupted`)
-   and the process exits 0 at once;
+2. while it imports its node module and builds its nodes (`interruptible_startup`), a stop
+   request aborts that (`StartupInterrupted`) and the process exits 0 at once;
 3. from then on a stop request only sets a flag and calls the registered wake-ups (the
    executor's guard condition) from a watcher thread woken through ``signal.set_wakeup_fd``,
    since the main thread may be blocked in rcl's wait (see ``inflarm_msgs_json.ros.spin``); the
@@ -19,7 +19,8 @@ node's modules import is lost or ends in a traceback. Instead, every node execut
 Stdlib only: this module must stay cheap to import.
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+import contextlib
 import faulthandler
 import importlib
 import os
@@ -122,12 +123,36 @@ def remove_wakeup(callback: Callable[[], None]) -> None:
 def _drop_interrupted_startup(hook: Callable) -> Callable:
     """``sys.unraisablehook`` that stays quiet about a `StartupInterrupted` which landed where
     it cannot propagate (a C extension's callback, e.g. scipy's Sobol table loading, reports it as
-    "Exception ignored in ..."): the stop request is kept, and the entry point exits once the
-    import returns."""
+    "Exception ignored in ..."): the stop request is kept, and start-up stops at its next check."""
     def unraisable(info) -> None:
         if not isinstance(info.exc_value, StartupInterrupted):
             hook(info)
     return unraisable
+
+
+@contextlib.contextmanager
+def interruptible_startup() -> Iterator[None]:
+    """Within this block (main thread), a stop request raises `StartupInterrupted` at once.
+
+    For start-up work that holds nothing accepted yet: importing a node module, building the
+    nodes (a renderer, a model: up to seconds on a loaded machine). A stop request that came
+    before the block is raised on entry. Nested blocks are one window.
+    """
+    global _abort_startup
+    if _abort_startup:
+        yield
+        return
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _drop_interrupted_startup(previous_hook)
+    _abort_startup = True
+    try:
+        if _stop.is_set():
+            _abort_startup = False
+            raise StartupInterrupted('stop requested')
+        yield
+    finally:
+        _abort_startup = False
+        sys.unraisablehook = previous_hook
 
 
 def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
@@ -137,13 +162,10 @@ def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
     node module itself, whose imports (rclpy, numpy, Pinocchio) take about a second.
     """
     def entry() -> None:
-        global _abort_startup
-        _abort_startup = True
-        previous_hook = sys.unraisablehook
-        sys.unraisablehook = _drop_interrupted_startup(previous_hook)
         try:
-            install_stop_handlers()
-            main = getattr(importlib.import_module(module), function)
+            with interruptible_startup():
+                install_stop_handlers()
+                main = getattr(importlib.import_module(module), function)
         except BaseException:
             # Raised where the stop request found the import, it may arrive wrapped: a C
             # extension whose initialisation it interrupted reports "ImportError:
@@ -151,9 +173,6 @@ def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
             if stop_requested():
                 sys.exit(0)
             raise
-        finally:
-            _abort_startup = False
-            sys.unraisablehook = previous_hook
         if stop_requested():
             sys.exit(0)
         main()

@@ -2,7 +2,8 @@
 
 Start: the stop signals are owned before anything else (`inflarm_msgs_json.ros.signals`);
 rclpy is initialized with its own signal handlers off; the nodes are built (a ``ValueError`` or
-parameter error there is a bad configuration: logged, exit code 1).
+parameter error there is a bad configuration: logged, exit code 1), and a stop request during
+that aborts it at once (what was built is destroyed as below).
 
 Stop (SIGINT, SIGTERM, or a node calling `request_stop`): the request wakes the executor
 through its guard condition, the spin loop returns between callbacks, then, in order: the
@@ -30,8 +31,10 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
 from inflarm_msgs_json.ros.signals import (
+    StartupInterrupted,
     add_wakeup,
     install_stop_handlers,
+    interruptible_startup,
     remove_wakeup,
     request_stop,
     stop_requested,
@@ -65,20 +68,21 @@ def run_nodes(make_nodes: Sequence[Callable[[], Node]], args: list[str] | None =
     nodes: list[Node] = []
     executor: Executor | None = None
     try:
-        for make_node in make_nodes:
-            if stop_requested():
-                return
-            try:
-                nodes.append(make_node())
-            except (ValueError, ParameterException) as error:
-                # A bad configuration: the message says more than a traceback would.
-                executable = os.path.basename(sys.argv[0]) or 'node'
-                rclpy.logging.get_logger(executable).error(f'cannot start: {error}')
-                sys.exit(1)
+        with interruptible_startup():
+            for make_node in make_nodes:
+                try:
+                    nodes.append(make_node())
+                except (ValueError, ParameterException) as error:
+                    # A bad configuration: the message says more than a traceback would.
+                    executable = os.path.basename(sys.argv[0]) or 'node'
+                    rclpy.logging.get_logger(executable).error(f'cannot start: {error}')
+                    sys.exit(1)
         executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
         for node in nodes:
             executor.add_node(node)
         _spin_until_stop(executor)
+    except StartupInterrupted:
+        pass  # stopped while the nodes were built
     except ExternalShutdownException:
         pass  # the context was shut down by someone else: stop as for a signal
     finally:
