@@ -217,12 +217,13 @@ class ProcessGroup:
         """Stop every running child, the last started first: SIGINT, then SIGKILL if it is
         still alive ``grace_s`` later.
 
-        One at a time because Fast DDS 2.14 busy-waits when a participant is deleted while one
-        of its discovery callbacks runs (eProsima/Fast-DDS#6513): with all of them leaving at
-        once, each one hears of the others' endpoints going away while it deletes its own
-        participant, and on a loaded machine that wait lasted seconds or forever (seen here:
-        1 stop in about 1,000 hung in ``rmw_destroy_node``). A child stopped alone hears of
-        no one else leaving.
+        One at a time because of a Fast DDS 2.14 bug (eProsima/Fast-DDS#6513): deleting a
+        participant while one of its discovery callbacks runs can spin for ever. Seen here with
+        gdb, 1 stop in about 1,000 with all nodes stopped at once: the main thread spinning in
+        ``DomainParticipant::set_listener`` (from ``rmw_destroy_node``), the callback's thread
+        blocked on a mutex in ``onReaderDiscovery``. Stopped at once, each node hears of the
+        others' endpoints going away while it deletes its own participant; stopped alone, it
+        hears of no one leaving.
 
         Returns each child's exit code (negative: killed by that signal). A child that hung
         first gets SIGUSR1, on which an inflarm node prints every thread's stack.
