@@ -62,3 +62,35 @@ def test_a_stop_request_while_a_node_is_built_stops_it_at_once(tmp_path, domain_
     assert run.returncode == 0, run.stderr
     assert 'built' not in run.stdout
     assert 'Traceback' not in run.stderr and 'Warning' not in run.stderr, run.stderr
+
+
+# What Cython does with an exception a `cdef` function cannot propagate, when it keeps the full
+# traceback (scipy's Sobol tables, interrupted there in the stress test): PyErr_PrintEx, which
+# hands it to sys.excepthook, then the unraisable report; the caller carries on.
+CYTHON_VICTIM = """
+import os, signal, sys
+def interrupted():
+    os.kill(os.getpid(), signal.SIGINT)
+    for _ in range(100_000):  # the handler runs here
+        pass
+try:
+    interrupted()
+except BaseException as error:
+    sys.excepthook(type(error), error, error.__traceback__)
+    sys.unraisablehook(type('UnraisableHookArgs', (), dict(
+        exc_type=type(error), exc_value=error, exc_traceback=error.__traceback__,
+        err_msg=None, object='cython_victim.cdef_function'))())
+def main():
+    print('main ran')
+"""
+
+
+def test_a_stop_request_that_an_extension_reports_with_a_traceback_stops_quietly(tmp_path):
+    (tmp_path / 'cython_victim.py').write_text(CYTHON_VICTIM)
+    code = ('import sys; sys.path.insert(0, sys.argv[1]); '
+            'from inflarm_msgs_json.ros.signals import node_entry; node_entry("cython_victim")()')
+    run = subprocess.run([sys.executable, '-c', code, str(tmp_path)], capture_output=True,
+                         text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert 'main ran' not in run.stdout
+    assert 'StartupInterrupted' not in run.stderr and 'Traceback' not in run.stderr, run.stderr

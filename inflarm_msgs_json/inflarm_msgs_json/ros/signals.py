@@ -120,14 +120,20 @@ def remove_wakeup(callback: Callable[[], None]) -> None:
             _wakeups.remove(callback)
 
 
-def _drop_interrupted_startup(hook: Callable) -> Callable:
-    """``sys.unraisablehook`` that stays quiet about a `StartupInterrupted` which landed where
-    it cannot propagate (a C extension's callback, e.g. scipy's Sobol table loading, reports it as
-    "Exception ignored in ..."): the stop request is kept, and start-up stops at its next check."""
+def _quiet_unraisable(hook: Callable) -> Callable:
+    """``sys.unraisablehook`` that drops a `StartupInterrupted` (see `interruptible_startup`)."""
     def unraisable(info) -> None:
         if not isinstance(info.exc_value, StartupInterrupted):
             hook(info)
     return unraisable
+
+
+def _quiet_excepthook(hook: Callable) -> Callable:
+    """``sys.excepthook`` that drops a `StartupInterrupted` (see `interruptible_startup`)."""
+    def excepthook(kind, value, traceback) -> None:
+        if not isinstance(value, StartupInterrupted):
+            hook(kind, value, traceback)
+    return excepthook
 
 
 @contextlib.contextmanager
@@ -137,13 +143,19 @@ def interruptible_startup() -> Iterator[None]:
     For start-up work that holds nothing accepted yet: importing a node module, building the
     nodes (a renderer, a model: up to seconds on a loaded machine). A stop request that came
     before the block is raised on entry. Nested blocks are one window.
+
+    Where the exception lands in a C extension's callback, it cannot propagate: the extension
+    reports it instead, through ``sys.unraisablehook`` ("Exception ignored in ...", seen in
+    scipy's Sobol table loading) and, for Cython's full tracebacks, ``sys.excepthook`` too
+    (seen there as well). Both stay quiet about it inside the block; the stop request is
+    kept, and start-up stops at its next check.
     """
     global _abort_startup
     if _abort_startup:
         yield
         return
-    previous_hook = sys.unraisablehook
-    sys.unraisablehook = _drop_interrupted_startup(previous_hook)
+    hooks = sys.unraisablehook, sys.excepthook
+    sys.unraisablehook, sys.excepthook = _quiet_unraisable(hooks[0]), _quiet_excepthook(hooks[1])
     _abort_startup = True
     try:
         if _stop.is_set():
@@ -152,7 +164,7 @@ def interruptible_startup() -> Iterator[None]:
         yield
     finally:
         _abort_startup = False
-        sys.unraisablehook = previous_hook
+        sys.unraisablehook, sys.excepthook = hooks
 
 
 def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
