@@ -21,12 +21,17 @@ def main():
 """
 
 
-def test_a_stop_request_that_lands_where_it_cannot_raise_still_stops_quietly(tmp_path):
-    (tmp_path / 'victim.py').write_text(VICTIM)
+def run_entry_point(tmp_path, module: str, source: str, **env) -> subprocess.CompletedProcess:
+    """Run ``node_entry(module)`` in a fresh interpreter, ``module`` written from ``source``."""
+    (tmp_path / f'{module}.py').write_text(source)
     code = ('import sys; sys.path.insert(0, sys.argv[1]); '
-            'from inflarm_msgs_json.ros.signals import node_entry; node_entry("victim")()')
-    run = subprocess.run([sys.executable, '-c', code, str(tmp_path)], capture_output=True,
-                         text=True, timeout=60)
+            f'from inflarm_msgs_json.ros.signals import node_entry; node_entry("{module}")()')
+    return subprocess.run([sys.executable, '-c', code, str(tmp_path)], capture_output=True,
+                          text=True, timeout=40, env=dict(os.environ, **env))
+
+
+def test_a_stop_request_that_lands_where_it_cannot_raise_still_stops_quietly(tmp_path):
+    run = run_entry_point(tmp_path, 'victim', VICTIM)
     assert run.returncode == 0, run.stderr
     assert 'main ran' not in run.stdout  # the stop request was kept
     assert 'Exception ignored' not in run.stderr and 'Traceback' not in run.stderr, run.stderr
@@ -53,12 +58,8 @@ def main():
 
 
 def test_a_stop_request_while_a_node_is_built_stops_it_at_once(tmp_path, domain_id):
-    (tmp_path / 'slow_node.py').write_text(SLOW_NODE)
-    code = ('import sys; sys.path.insert(0, sys.argv[1]); '
-            'from inflarm_msgs_json.ros.signals import node_entry; node_entry("slow_node")()')
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id))
-    run = subprocess.run([sys.executable, '-c', code, str(tmp_path)], capture_output=True,
-                         text=True, timeout=40, env=env)  # the build alone would take 60 s
+    # the build alone would take 60 s, longer than run_entry_point's timeout
+    run = run_entry_point(tmp_path, 'slow_node', SLOW_NODE, ROS_DOMAIN_ID=str(domain_id))
     assert run.returncode == 0, run.stderr
     assert 'built' not in run.stdout
     assert 'Traceback' not in run.stderr and 'Warning' not in run.stderr, run.stderr
@@ -86,11 +87,7 @@ def main():
 
 
 def test_a_stop_request_that_an_extension_reports_with_a_traceback_stops_quietly(tmp_path):
-    (tmp_path / 'cython_victim.py').write_text(CYTHON_VICTIM)
-    code = ('import sys; sys.path.insert(0, sys.argv[1]); '
-            'from inflarm_msgs_json.ros.signals import node_entry; node_entry("cython_victim")()')
-    run = subprocess.run([sys.executable, '-c', code, str(tmp_path)], capture_output=True,
-                         text=True, timeout=60)
+    run = run_entry_point(tmp_path, 'cython_victim', CYTHON_VICTIM)
     assert run.returncode == 0, run.stderr
     assert 'main ran' not in run.stdout
     assert 'StartupInterrupted' not in run.stderr and 'Traceback' not in run.stderr, run.stderr
