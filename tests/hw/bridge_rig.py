@@ -1,5 +1,6 @@
 """hw_bridge and sim_mcu as real processes on a pty, and a probe node talking to them over DDS."""
 
+import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -64,6 +65,11 @@ class Rig:
     @property
     def status(self):
         return self.statuses[-1][1] if self.statuses else None
+
+    def chamber(self, name: str) -> float:
+        """The latest measured pressure of chamber ``name`` [Pa]; NaN before the first (a
+        status can arrive before any chamber_pressures message)."""
+        return self.chambers[-1][name] if self.chambers else math.nan
 
     def run(self, until=lambda: False, timeout_s=10.0, period_s=0.1) -> bool:
         """Spin, sending the current commands every ``period_s``, until ``until()`` or timeout."""

@@ -40,7 +40,7 @@ def test_the_bridge_carries_both_robots_and_its_watchdog_makes_them_safe(
     # the same topics and types as arm_sim and sra_sim
     rig.pressures, rig.motors = {'PEA': 20e3, 'B3': 30e3, 'B4': 30e3}, [0.1, 0.6, -1.1]
     rig.wait_status(lambda s: (s.motors, s.valves) == ('follow', 'follow'))
-    assert rig.run(lambda: rig.chambers and abs(rig.chambers[-1]['B3'] - 30e3) < 1e3
+    assert rig.run(lambda: abs(rig.chamber('B3') - 30e3) < 1e3
                    and abs(rig.joints[-1].position[0] - 0.1) < 1e-3, 15.0), rig.chambers[-1:]
     joints = rig.joints[-1]
     assert list(joints.name) == MOTORS
@@ -86,7 +86,7 @@ def test_the_bridge_carries_both_robots_and_its_watchdog_makes_them_safe(
     report(capsys, f'command watchdog (0.3 s): MCU confirmed the safe output {latency_ms(status)}'
            ' after the watchdog fired (bridge clock); the test saw it '
            f'{(seen - last - 0.3) * 1000:.0f} ms after its last command + 0.3 s')
-    assert rig.run(lambda: rig.chambers[-1]['B3'] < 2e3, 10.0)
+    assert rig.run(lambda: rig.chamber('B3') < 2e3, 10.0)
     held = rig.joints[-1].position[0]
     assert rig.run(lambda: False, 0.5) is False
     assert abs(rig.joints[-1].position[0] - held) < 1e-3
@@ -104,17 +104,18 @@ def test_lifecycle_transitions_command_the_safe_output_first(
     status = rig.wait_status(lambda s: s.state == 'inactive')[1]
     assert (status.motors, status.valves) == ('none', 'safe')
     assert rig.run(lambda: False, 0.5) is False
-    assert rig.chambers[-1]['B1'] < 1e3  # inactive: commands are not executed
+    assert rig.run(lambda: bool(rig.chambers), 10.0)
+    assert rig.chamber('B1') < 1e3  # inactive: commands are not executed
     assert rig.transition(Transition.TRANSITION_ACTIVATE)
     rig.wait_status(lambda s: s.valves == 'follow')
-    assert rig.run(lambda: rig.chambers[-1]['B1'] > 25e3, 10.0)
+    assert rig.run(lambda: rig.chamber('B1') > 25e3, 10.0)
     start = time.monotonic()
     assert rig.transition(Transition.TRANSITION_DEACTIVATE)
     seen, status = rig.wait_status(lambda s: s.valves == 'safe' and s.safe_latency is not None)
     report(capsys, f'deactivate: MCU confirmed the safe output {latency_ms(status)} after the '
            f'transition; the service returned and the status arrived after '
            f'{(seen - start) * 1000:.0f} ms')
-    assert rig.run(lambda: rig.chambers[-1]['B1'] < 2e3, 10.0)
+    assert rig.run(lambda: rig.chamber('B1') < 2e3, 10.0)
     assert rig.transition(Transition.TRANSITION_CLEANUP)
     assert rig.lifecycle_state() == 'unconfigured'
 
@@ -157,7 +158,7 @@ def test_mcu_silence_and_link_loss_are_safe_and_the_bridge_reconnects(
            ' the injection (link timeout 200 ms; the MCU watchdog, 250 ms, vents its valves)')
     assert 'link_lost' in rig.status.faults
     rig.wait_status(lambda s: s.link == 'connected' and s.valves == 'follow', 10.0)
-    assert rig.run(lambda: rig.chambers[-1]['B2'] > 25e3, 10.0)
+    assert rig.run(lambda: rig.chamber('B2') > 25e3, 10.0)
 
     # the MCU goes away (the process ends) and comes back on the same link: reconnected
     sim = node_processes.group.processes['sim_mcu']
@@ -169,7 +170,7 @@ def test_mcu_silence_and_link_loss_are_safe_and_the_bridge_reconnects(
     report(capsys, f'MCU gone: outputs safe {(seen - start) * 1000:.0f} ms after it exited')
     rig.start_sim('sra', name='sim_mcu_again')
     rig.wait_status(lambda s: s.link == 'connected' and s.valves == 'follow', 15.0)
-    assert rig.run(lambda: rig.chambers[-1]['B2'] > 25e3, 10.0)
+    assert rig.run(lambda: rig.chamber('B2') > 25e3, 10.0)
     assert rig.lifecycle_state() == 'active'
 
 
@@ -180,7 +181,7 @@ def test_over_pressure_and_frozen_sensors_vent_and_latch_until_reset(
     rig.wait_status(lambda s: s.valves == 'follow' and s.motors == 'follow', 20.0)
 
     rig.inject('over_pressure', 1, 160e3, 1.5)  # B1's valve delivers 160 kPa whatever it gets
-    assert rig.run(lambda: rig.chambers[-1]['B1'] > 130e3 or 'over_pressure' in (
+    assert rig.run(lambda: rig.chamber('B1') > 130e3 or 'over_pressure' in (
         rig.status.faults), 10.0)
     crossed = time.monotonic()
     seen, status = rig.wait_status(lambda s: 'over_pressure' in s.latched
@@ -191,7 +192,7 @@ def test_over_pressure_and_frozen_sensors_vent_and_latch_until_reset(
     assert status.motors == 'hold'
     response = rig.reset_fault()
     assert not response.success and 'over_pressure persists: B1 at' in response.message
-    assert rig.run(lambda: rig.chambers[-1]['B1'] < 2e3, 15.0)  # injection over, vented
+    assert rig.run(lambda: rig.chamber('B1') < 2e3, 15.0)  # injection over, vented
     response = rig.reset_fault()
     assert response.success, response.message
     rig.wait_status(lambda s: not s.latched and s.valves == 'follow')
