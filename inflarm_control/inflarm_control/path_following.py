@@ -121,7 +121,7 @@ def shrink_lateral_outputs(outputs: npt.ArrayLike, dead_zone: float) -> npt.NDAr
     ``u -> sign(u) max(|u| - dead_zone, 0)``. Under the quadrant rule an axis acts only once
     its bellows is past the valves' dead zone, so a holding pressure learned that way is that
     much larger than what the preloaded pair needs. Measured on the paper's obstacle scenario
-    (simulated plant, 6 seeds, one and two steps of latency): 2.5-2.8 mm at most from the path
+    (simulated plant, 6 seeds, one and two steps of latency): 2.4-2.8 mm at most from the path
     with 4 kPa, against 2.4-5.0 mm unshrunk and 3.9-6.3 mm zeroing the outputs below 4 kPa.
 
     Parameters
