@@ -49,7 +49,13 @@ class Rig:
         self.pressure_pub = probe.create_publisher(String, 'chamber_pressure_command',
                                                    COMMAND_QOS)
         self.link_status_pub = probe.create_publisher(String, 'link_status', RELIABLE_QOS)
-        self.sim_parameters = AsyncParameterClient(probe, 'sim_mcu')
+        # Clients made once, here: a reply to a client that is only milliseconds old can be
+        # dropped (rmw_fastrtps waits 100 ms for its reader to match, ros2/rmw_fastrtps#467).
+        self.parameter_clients = {
+            node: AsyncParameterClient(probe, node) for node in ('sim_mcu', 'hw_bridge')}
+        self.clients = {name: probe.create_client(service_type, name) for service_type, name in (
+            (Trigger, '/hw_bridge/reset_fault'), (ChangeState, '/hw_bridge/change_state'),
+            (GetState, '/hw_bridge/get_state'))}
         executor.add_node(probe)
         self.pressures: dict | None = None
         self.motors: list | None = None
@@ -95,35 +101,38 @@ class Rig:
                         **kwargs), (self.status, self.processes.output()[-3000:])
         return self.statuses[-1]
 
+    def set_parameters(self, node: str, parameters: list[Parameter]) -> None:
+        """Set ``parameters`` of ``node`` (sim_mcu or hw_bridge) at once; they must be accepted."""
+        client = self.parameter_clients[node]
+        assert client.wait_for_services(timeout_sec=10.0), node
+        future = client.set_parameters_atomically(parameters)
+        assert self.run(future.done, timeout_s=10.0), f'{node}: no reply'
+        assert future.result().result.successful, future.result()
+
     def inject(self, kind, channel=0, value=0.0, duration_s=0.0) -> None:
-        client = self.sim_parameters
-        assert client.wait_for_services(timeout_sec=10.0)
-        future = client.set_parameters_atomically([
+        self.set_parameters('sim_mcu', [
             Parameter('fault.channel', value=channel),
             Parameter('fault.value', value=float(value)),
             Parameter('fault.duration_s', value=float(duration_s)),
             Parameter('fault.kind', value=kind)])
-        self.executor.spin_until_future_complete(future, timeout_sec=10.0)
-        assert future.result().result.successful, future.result()
 
-    def call(self, service_type, name, request):
-        client = self.probe.create_client(service_type, name)
+    def call(self, name, request):
+        client = self.clients[name]
         assert client.wait_for_service(timeout_sec=10.0), name
         future = client.call_async(request)
-        assert self.run(future.done, timeout_s=10.0)
-        self.probe.destroy_client(client)
+        assert self.run(future.done, timeout_s=10.0), f'{name}: no reply'
         return future.result()
 
     def reset_fault(self) -> Trigger.Response:
-        return self.call(Trigger, '/hw_bridge/reset_fault', Trigger.Request())
+        return self.call('/hw_bridge/reset_fault', Trigger.Request())
 
     def transition(self, transition_id: int) -> bool:
         request = ChangeState.Request()
         request.transition.id = transition_id
-        return self.call(ChangeState, '/hw_bridge/change_state', request).success
+        return self.call('/hw_bridge/change_state', request).success
 
     def lifecycle_state(self) -> str:
-        return self.call(GetState, '/hw_bridge/get_state', GetState.Request()).current_state.label
+        return self.call('/hw_bridge/get_state', GetState.Request()).current_state.label
 
     def publish_link_status(self, link, moment) -> None:
         self.link_status_pub.publish(to_string_msg(

@@ -10,6 +10,7 @@ import time
 from lifecycle_msgs.msg import Transition
 import numpy as np
 import pytest
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from bridge_rig import MOTORS, Rig
@@ -121,13 +122,7 @@ def test_lifecycle_transitions_command_the_safe_output_first(
 
     # an MCU of another protocol version: configure fails and says why
     rig.start_sim('sra', {'protocol_version': 2, 'link': str(tmp_path / 'old')}, name='old_mcu')
-    from rclpy.parameter import Parameter
-    from rclpy.parameter_client import AsyncParameterClient
-    client = AsyncParameterClient(rig.probe, 'hw_bridge')
-    assert client.wait_for_services(timeout_sec=10.0)
-    future = client.set_parameters([Parameter('port', value=str(tmp_path / 'old'))])
-    executor.spin_until_future_complete(future, timeout_sec=10.0)
-    assert future.result().results[0].successful
+    rig.set_parameters('hw_bridge', [Parameter('port', value=str(tmp_path / 'old'))])
     assert not rig.transition(Transition.TRANSITION_CONFIGURE)
     assert rig.lifecycle_state() == 'unconfigured'
     assert node_processes.wait_for_output('speaks protocol version 2'), node_processes.output()
