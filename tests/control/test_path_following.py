@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+from inflarm_bringup.knowledge_cli import knowledge_plant
 from inflarm_control.knowledge import KnowledgeGrid, build_knowledge_database, holding_pressure
 from inflarm_control.path_following import (
     PathFollower,
@@ -182,10 +183,11 @@ def test_the_reference_reaches_the_end_and_the_last_waypoint_is_held():
 
 @pytest.fixture(scope='module')
 def knowledge(tmp_path_factory):
-    # the demo's database, cut down to the path's z range 710-730 mm (768 points)
+    # the demo's database (learnt on the noise-free plant, so the same in every run), cut down
+    # to the path's z range 710-730 mm (768 points)
     grid = KnowledgeGrid(origin=(-0.01, -0.01, 0.71), spacing=0.01, shape=(16, 16, 3))
     path = tmp_path_factory.mktemp('knowledge') / 'knowledge.db'
-    db = build_knowledge_database(path, grid, plant_factory=SoftArmPlant, progress=False)
+    db = build_knowledge_database(path, grid, plant_factory=knowledge_plant, progress=False)
     yield db
     db.close()
 
@@ -231,6 +233,7 @@ def test_the_scenario_path_is_followed_within_5_mm(knowledge, scenario_path, see
     truth, duration = follow_scenario(scenario_path, feedforward, seed)
     error = project_on_polyline(truth, scenario_path)[0]
     assert np.linalg.norm(truth[-1] - scenario_path[-1]) < 0.002, truth[-1]
+    # 2.6-2.9 mm here; the demo adds the camera's error to this, under the paper's 5 mm
     assert error.max() < 0.0035, (error.max(), truth[np.argmax(error)])
     assert np.sqrt(np.mean(error**2)) < 0.002
     assert duration < 110.0  # the planner's 50 s at 5 mm/s, slowed where the arm lags
