@@ -120,8 +120,8 @@ def mission_node_class():
     class DemoMission(GuardedCallbacks, Node):
         """Sends the two missions' tasks and records what the system does."""
 
-        def __init__(self) -> None:
-            super().__init__('demo_mission')
+        def __init__(self, **kwargs) -> None:
+            super().__init__('demo_mission', **kwargs)
             self.arm = FlexibleArm()
             self.ball = Samples()  # measured (camera) end of the soft arm
             self.soft_truth = Samples()
@@ -256,9 +256,12 @@ def mission_node_class():
                 # with the obstacle known from here on.
                 self.obstacles_pub.publish(self.to_string_msg(self.obstacle_set))
                 self.request_plan(latest, SOFT_START)
+                self.enter('soft', 'planning onto the start')
+            elif self.soft_phase == 'planning onto the start' and self.plan_to(SOFT_START):
+                # The settling is timed from here: a first plan can take seconds (its free
+                # space is built, its kernel compiled), while the trial still holds the end.
                 self.enter('soft', 'settling at the start')
-            elif self.soft_phase == 'settling at the start' and self.plan_to(SOFT_START) \
-                    and self.settled_at(SOFT_START):
+            elif self.soft_phase == 'settling at the start' and self.settled_at(SOFT_START):
                 self.request_plan(SOFT_START, SOFT_GOAL)
                 self.enter('soft', 'planning')
             elif self.soft_phase == 'planning' and self.plan_to(SOFT_GOAL):
