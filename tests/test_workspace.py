@@ -7,7 +7,7 @@ import re
 import subprocess
 
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
-import numpy
+import numpy as np
 import pytest
 import rclpy
 from rclpy.time import Time
@@ -90,7 +90,7 @@ def test_a_params_file_takes_effect(node_processes, executor, tmp_path):
     stamps = [Time.from_msg(msg.header.stamp).nanoseconds * 1e-9 for msg in received]
     # The median period is robust to a late timer callback on a loaded machine; the default
     # rate (50 Hz, 0.02 s) is far outside this band.
-    assert 0.9 / 7.5 < numpy.median(numpy.diff(stamps)) < 1.1 / 7.5
+    assert 0.9 / 7.5 < np.median(np.diff(stamps)) < 1.1 / 7.5
 
 
 def test_a_bad_params_file_value_stops_the_node_at_startup(tmp_path, domain_id):
