@@ -22,6 +22,8 @@ setup(
     entry_points={
         'console_scripts': [
             'ball_tracker = inflarm_vision.executables:ball_tracker',
+            'inflarm-calibrate-camera = inflarm_vision.calibration_cli:main',
+            'camera_driver = inflarm_vision.executables:camera_driver',
         ],
     },
 )

@@ -62,10 +62,11 @@ from inflarm_msgs_json import (
     encode,
 )
 from inflarm_msgs_json.ros.conversions import to_string_msg
-from inflarm_msgs_json.ros.image import numpy_to_image
+from inflarm_msgs_json.ros.image import bgr_to_compressed, numpy_to_image
 from inflarm_planning.nodes.path_planner import PathPlanner
 from inflarm_planning.scenario import GOAL, OBSTACLE, START
 from inflarm_vision.nodes.ball_tracker import BallTrackerNode
+from inflarm_vision.nodes.camera_driver import CameraDriverNode
 from ros_harness import wait_until
 
 ARM = FlexibleArm()
@@ -311,6 +312,13 @@ NODES = {
         'camera/camera_info': (lambda n: CameraInfo(**CAMERA.camera_info_fields()),
                                lambda n, out: n.camera is not None and n.camera.width == 320),
         'camera/image_raw': (lambda n: _camera_image(), _published('ball_position'))}),
+    'ball_tracker (compressed)': NodeCase(BallTrackerNode, {'transport': 'compressed'}, valid={
+        'camera/camera_info': (lambda n: CameraInfo(**CAMERA.camera_info_fields()),
+                               lambda n, out: n.camera is not None and n.camera.width == 320),
+        'camera/image_raw/compressed': (lambda n: bgr_to_compressed(_camera_bgr()),
+                                        _published('ball_position'))}),
+    # no subscriptions: its timers, services and parameters, with no camera to open
+    'camera_driver': NodeCase(CameraDriverNode, {'device': '/nonexistent/camera.avi'}),
     'joint_state_monitor': NodeCase(JointStateMonitor, valid={
         'joint_states': (lambda n: JointState(name=['joint_1'], position=[0.1]),
                          lambda n, out: n.latest is not None)}),
@@ -320,11 +328,14 @@ NODES = {
 CAMERA = PinholeCamera.ideal(320, 240, 450.0)
 
 
-def _camera_image():
+def _camera_bgr():
     """The ball at the soft arm's rest point, seen from ball_tracker's default camera pose."""
     pose = RigidTransform.from_quaternion([0.0, -1.1, 0.78], [0.0, 0.70710678, 0.70710678, 0.0])
-    frame = SyntheticCamera(CAMERA, pose).render(np.array([0.0, 0.0, 0.604]))
-    return numpy_to_image(frame.image, 'bgr8')
+    return SyntheticCamera(CAMERA, pose).render(np.array([0.0, 0.0, 0.604])).image
+
+
+def _camera_image():
+    return numpy_to_image(_camera_bgr(), 'bgr8')
 
 
 def _path_from_current_tip(node) -> Path:

@@ -10,7 +10,9 @@ sim.launch.py backend:=sim_mcu rviz:=true``):
 - ``port``: the MCU's serial device (``hardware``), or the pty link ``sim_mcu`` makes;
 - ``rviz``: ``true`` adds `inflarm_bringup.systems.visualization_nodes` (robot_state_publisher,
   the static frames, rviz2 with ``rviz/inflarm.rviz``);
-- ``log_level``: of every inflarm node (default ``info``).
+- ``log_level``: of every inflarm node (default ``info``);
+- ``camera_transport``: ``raw`` or ``compressed``, the camera images from the simulated camera
+  to ``ball_tracker`` (default ``''``: as the parameter files say, raw).
 
 ``launch`` and ``launch_ros`` are imported when a description is made, not with this module:
 they are not on PyPI, and the rest of the package works without them.
@@ -19,7 +21,13 @@ they are not on PyPI, and the rest of the package works without them.
 import os
 
 from inflarm_bringup.processes import NodeProcess, overrides_file, ros_environment
-from inflarm_bringup.systems import BACKENDS, backend, system_nodes, visualization_nodes
+from inflarm_bringup.systems import (
+    BACKENDS,
+    CAMERA_TRANSPORTS,
+    backend,
+    system_nodes,
+    visualization_nodes,
+)
 
 
 def system_launch_description(system: str):
@@ -39,6 +47,10 @@ def system_launch_description(system: str):
                                           'and RViz'),
         DeclareLaunchArgument('log_level', default_value='info',
                               description='log level of every inflarm node'),
+        DeclareLaunchArgument('camera_transport', default_value='',
+                              choices=['', *CAMERA_TRANSPORTS],
+                              description="camera images raw or JPEG-compressed; '': as "
+                                          'configured (raw)'),
         OpaqueFunction(function=_system_actions, kwargs={'system': system}),
     ])
 
@@ -46,7 +58,7 @@ def system_launch_description(system: str):
 def _system_actions(context, system: str) -> list:
     arguments = context.launch_configurations
     nodes = system_nodes(system, backend(arguments['backend'], arguments['port']),
-                         arguments['log_level'])
+                         arguments['log_level'], arguments['camera_transport'] or None)
     if arguments['rviz'] == 'true':
         nodes += visualization_nodes()
     environment = {k: v for k, v in ros_environment().items() if os.environ.get(k) != v}

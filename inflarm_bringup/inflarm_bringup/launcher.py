@@ -2,7 +2,7 @@
 
     inflarm-launch [SYSTEM] [--backend sim|sim_mcu|hardware] [--port DEVICE]
                    [--on-exit stop|restart|ignore] [--in-process] [--duration S]
-                   [--log-level LEVEL] [--rviz]
+                   [--log-level LEVEL] [--rviz] [--camera-transport raw|compressed]
 
 Each node of the system (``inflarm_bringup.systems``) runs as its own process with its
 parameter files, its output prefixed by its name. Ctrl-C or SIGTERM (or the end of
@@ -14,6 +14,10 @@ exited cleanly and none died.
 
 ``--in-process`` runs every node in this one process instead, on a multi-threaded executor
 (the nodes' parameter files apply as in separate processes).
+
+``--camera-transport`` sends the camera images raw or JPEG-compressed: it sets the simulated
+camera's ``camera.transport`` and ``ball_tracker``'s ``transport`` (default: as their parameter
+files say, raw).
 
 ``--rviz`` adds ``robot_state_publisher``, the static frames and RViz
 (`inflarm_bringup.systems.visualization_nodes`), from a ROS 2 Jazzy install.
@@ -33,6 +37,7 @@ import time
 from inflarm_bringup.processes import NodeProcess, ProcessGroup, is_installed, ros_environment
 from inflarm_bringup.systems import (
     BACKENDS,
+    CAMERA_TRANSPORTS,
     SYSTEMS,
     VISUALIZATION_PACKAGES,
     backend,
@@ -151,9 +156,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--rviz', action='store_true',
                         help='also robot_state_publisher, the static frames and RViz '
                              '(from a ROS 2 Jazzy install)')
+    parser.add_argument('--camera-transport', default=None, choices=CAMERA_TRANSPORTS,
+                        help="camera images as sensor_msgs/Image ('raw') or JPEG "
+                             "CompressedImage ('compressed'), from the simulated camera to "
+                             'ball_tracker (default: as configured, raw)')
     args = parser.parse_args(argv)
     try:
-        nodes = system_nodes(args.system, backend(args.backend, args.port), args.log_level)
+        nodes = system_nodes(args.system, backend(args.backend, args.port), args.log_level,
+                             args.camera_transport)
     except ValueError as error:
         parser.error(str(error))
     if args.rviz:

@@ -19,6 +19,11 @@ Backends, for the robots:
   pseudo-terminal: the hardware path, simulated;
 - ``hardware``: ``hw_bridge`` on the serial port of a real MCU.
 
+Camera transport (``--camera-transport``): ``raw`` or ``compressed`` sets the simulated camera's
+``camera.transport`` (``sra_sim``, ``sim_mcu``) and ``ball_tracker``'s ``transport`` alike, so
+that the images go as ``sensor_msgs/Image`` or as JPEG ``sensor_msgs/CompressedImage``; not
+given, the nodes' parameter files decide (raw).
+
 Visualization (`visualization_nodes`, ``--rviz``): ``robot_state_publisher`` on the estimator's
 deflected pose, the static frames (``world`` -> ``base_link``, ``world`` -> ``sra_mount``) and
 ``rviz2`` with ``rviz/inflarm.rviz``: nodes of a ROS 2 Jazzy install, not of PyPI.
@@ -37,6 +42,10 @@ from inflarm_bringup.processes import NodeProcess, config_path
 # The inflatable arm's geometry, stiffness and pressures, shared by every node that models it.
 ARM_CONFIG = (('inflarm_model', 'inflatable_arm.yaml'),)
 BACKENDS = ('sim', 'sim_mcu', 'hardware')
+CAMERA_TRANSPORTS = ('raw', 'compressed')
+# The parameter of each node that publishes or takes the camera images naming their transport.
+_TRANSPORT_PARAMETERS = {'sra_sim': 'camera.transport', 'sim_mcu': 'camera.transport',
+                         'ball_tracker': 'transport'}
 
 
 @dataclass(frozen=True)
@@ -119,12 +128,20 @@ SYSTEMS: dict[str, Callable[[Backend], tuple[NodeProcess, ...]]] = {
 """System name -> the nodes of the system on a backend; the first is the default."""
 
 
-def system_nodes(name: str, backend: Backend = Backend(), log_level: str | None = None  # noqa: B008
-                 ) -> tuple[NodeProcess, ...]:
-    """The nodes of the system ``name``, with ``log_level`` set on each if given."""
+def system_nodes(name: str, backend: Backend = Backend(), log_level: str | None = None,  # noqa: B008
+                 camera_transport: str | None = None) -> tuple[NodeProcess, ...]:
+    """The nodes of the system ``name``, with ``log_level`` set on each if given, and the
+    camera images sent as ``camera_transport`` (one of `CAMERA_TRANSPORTS`) if given."""
     if name not in SYSTEMS:
         raise ValueError(f'system must be one of {list(SYSTEMS)}, got {name!r}')
+    if camera_transport is not None and camera_transport not in CAMERA_TRANSPORTS:
+        raise ValueError(f'camera transport must be one of {list(CAMERA_TRANSPORTS)}, got '
+                         f'{camera_transport!r}')
     nodes = SYSTEMS[name](backend)
+    if camera_transport is not None:
+        nodes = tuple(replace(n, parameters={
+            **n.parameters, _TRANSPORT_PARAMETERS[n.executable]: camera_transport})
+            if n.executable in _TRANSPORT_PARAMETERS else n for n in nodes)
     return tuple(replace(n, log_level=log_level) for n in nodes) if log_level else nodes
 
 

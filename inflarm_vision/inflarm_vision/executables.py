@@ -8,3 +8,4 @@ OpenCV take about a second), so a stop request during start-up is never lost: se
 from inflarm_msgs_json.ros.signals import node_entry
 
 ball_tracker = node_entry('inflarm_vision.nodes.ball_tracker')
+camera_driver = node_entry('inflarm_vision.nodes.camera_driver')

@@ -4,13 +4,17 @@ executable).
 `CameraPublisher` renders the yellow ball at a point the node supplies through
 `inflarm_hw.synthetic_camera` and publishes, on the node:
 
-    camera/image_raw (sensor_msgs/Image, bgr8, SENSOR_QOS): stamped with the capture time,
-        published ``camera.latency_s`` later.
+    camera/image_raw (sensor_msgs/Image, bgr8, SENSOR_QOS), with ``camera.transport`` raw:
+        stamped with the capture time, published ``camera.latency_s`` later.
+    camera/image_raw/compressed (sensor_msgs/CompressedImage, JPEG, SENSOR_QOS), with
+        ``camera.transport`` compressed, instead: the same images, stamps and latency, JPEG at
+        ``camera.jpeg_quality`` (format ``bgr8; jpeg compressed bgr8``, as image_transport's
+        compressed publisher writes it).
     camera/camera_info (sensor_msgs/CameraInfo, SENSOR_QOS): the intrinsics, same stamp,
         published right after the image (as image_transport's CameraPublisher does; published
         before it, a subscriber to both received half the images over UDP in a test here).
 
-Frames are captured at the node's ``camera_rate_hz`` and only while ``camera/image_raw`` has a
+Frames are captured at the node's ``camera_rate_hz`` and only while the image topic has a
 subscriber (rendering costs about 10-20 ms a frame at 640x480).
 
 Parameters (`CAMERA_PARAMETERS`, declared by the node with its own; the defaults are those of
@@ -32,20 +36,27 @@ Parameters (`CAMERA_PARAMETERS`, declared by the node with its own; the defaults
         at runtime.
     camera.latency_s (double): delay from capture to publication [s].
     camera.frame_id (string, read-only): frame of the images.
+    camera.transport (string, read-only): ``raw`` (default) or ``compressed``.
+    camera.jpeg_quality (int, 1-100): JPEG quality of compressed images, changeable at
+        runtime.
 """
 
 from collections.abc import Callable
 
 import numpy as np
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from std_msgs.msg import Header
 
 from inflarm_hw.synthetic_camera import SraCamera, SyntheticCamera
-from inflarm_msgs_json.ros.image import numpy_to_image
+from inflarm_msgs_json.ros.image import bgr_to_compressed, numpy_to_image
 from inflarm_msgs_json.ros.parameters import Parameter
 from inflarm_msgs_json.ros.qos import SENSOR_QOS
 
 _C = SraCamera()
+CAMERA_TRANSPORTS = {'raw': (Image, 'camera/image_raw'),
+                     'compressed': (CompressedImage, 'camera/image_raw/compressed')}
+"""``camera.transport`` -> (message type, topic); topics as image_transport's."""
 CAMERA_PARAMETERS = (
     Parameter('camera.enabled', True, 'publish simulated camera images', read_only=True),
     Parameter('camera.width', _C.width, 'image width [px]', range=(16, 4096), read_only=True),
@@ -71,6 +82,9 @@ CAMERA_PARAMETERS = (
               range=(0.0, 2.0)),
     Parameter('camera.frame_id', 'camera_optical_frame', 'frame of the images',
               read_only=True),
+    Parameter('camera.transport', 'raw', "images as 'raw' (camera/image_raw) or 'compressed' "
+              '(JPEG on camera/image_raw/compressed)', read_only=True),
+    Parameter('camera.jpeg_quality', 90, 'JPEG quality of compressed images', range=(1, 100)),
 )
 
 
@@ -105,6 +119,11 @@ class CameraPublisher:
         Returns the ball's centre in the node's frame [m], shape (3,).
     seed : int or None
         Seed of the background and the noise.
+
+    Raises
+    ------
+    ValueError
+        A ``camera.*`` value the camera cannot have, naming the parameter.
     """
 
     def __init__(self, node: Node, params: dict,
@@ -112,8 +131,13 @@ class CameraPublisher:
         self.node = node
         self.params = params
         self.ball_position = ball_position
+        transport = params['camera.transport']
+        if transport not in CAMERA_TRANSPORTS:
+            raise ValueError(f'camera.transport must be one of {list(CAMERA_TRANSPORTS)}, '
+                             f"got '{transport}'")
+        self.compressed = transport == 'compressed'
         self.renderer = synthetic_camera_from_parameters(params, seed)
-        self.image_pub = node.create_publisher(Image, 'camera/image_raw', SENSOR_QOS)
+        self.image_pub = node.create_publisher(*CAMERA_TRANSPORTS[transport], SENSOR_QOS)
         self.info_pub = node.create_publisher(CameraInfo, 'camera/camera_info', SENSOR_QOS)
         self.timer = node.create_guarded_timer(1.0 / params['camera_rate_hz'], self.capture,
                                                name='camera')
@@ -126,11 +150,14 @@ class CameraPublisher:
         frame = self.renderer.render(self.ball_position(),
                                      exposure=self.params['camera.exposure'],
                                      blur_sigma_px=self.params['camera.blur_sigma_px'])
-        image = numpy_to_image(frame.image, 'bgr8')
-        image.header.stamp = stamp.to_msg()
-        image.header.frame_id = self.params['camera.frame_id']
+        header = Header(stamp=stamp.to_msg(), frame_id=self.params['camera.frame_id'])
+        if self.compressed:
+            image = bgr_to_compressed(frame.image, 'jpeg', self.params['camera.jpeg_quality'],
+                                      header)
+        else:
+            image = numpy_to_image(frame.image, 'bgr8', header)
         info = CameraInfo(**self.renderer.camera.camera_info_fields())
-        info.header = image.header
+        info.header = header
         remaining = self.params['camera.latency_s'] - (
             self.node.get_clock().now() - stamp).nanoseconds * 1e-9
         if remaining <= 0.0:
@@ -146,6 +173,6 @@ class CameraPublisher:
         holder.append(self.node.create_guarded_timer(remaining, deliver, name='camera'))
         self._pending.append(holder[0])
 
-    def publish(self, image: Image, info: CameraInfo) -> None:
+    def publish(self, image: Image | CompressedImage, info: CameraInfo) -> None:
         self.image_pub.publish(image)
         self.info_pub.publish(info)

@@ -21,7 +21,9 @@ Publishes:
     camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
         SENSOR_QOS: the simulated camera's view of the yellow ball at the soft arm's true end
         point, at ``camera_rate_hz``, with the soft arm (plant 'sra' or 'both'), when
-        ``camera.enabled`` and while someone subscribes.
+        ``camera.enabled`` and while someone subscribes; with ``camera.transport``
+        compressed, JPEG on camera/image_raw/compressed (sensor_msgs/CompressedImage) instead
+        of camera/image_raw.
 Parameters:
     plant (string, read-only): 'arm', 'sra' or 'both'.
     device, link (string, read-only): the tty to use, or the symlink to make to the new pty.
@@ -37,7 +39,8 @@ Parameters:
     measurement_noise_m, camera_rate_hz, truth_rate_hz, publish_ball_position (default
         false): the stand-in measurement, the camera rate and the truth topics.
     valve_delay_s (double, read-only): the soft arm's valve transport delay [s].
-    camera.* : the simulated camera, as for ``sra_sim``.
+    camera.* : the simulated camera, as for ``sra_sim`` (camera.transport, raw or
+        compressed, and camera.jpeg_quality among them).
     arm_frame_id, sra_frame_id (string, read-only); seed (int, read-only).
     fault.kind (string: '', clear, drop_bytes, corrupt_crc, silent, stick_sensor,
         over_pressure), fault.channel (int), fault.value (double), fault.duration_s (double):

@@ -13,7 +13,9 @@ Publishes:
     camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
         SENSOR_QOS: the simulated external camera's view of the yellow ball at the true end
         point, at ``camera_rate_hz``, when ``camera.enabled`` and while someone subscribes
-        (``inflarm_hw.nodes.camera_publisher``).
+        (``inflarm_hw.nodes.camera_publisher``); with ``camera.transport`` compressed, JPEG
+        on camera/image_raw/compressed (sensor_msgs/CompressedImage) instead of
+        camera/image_raw.
 Parameters:
     physics_rate_hz, state_rate_hz, camera_rate_hz (double): simulation, state and camera rates;
         each physics step integrates the wall-clock time since the previous one
@@ -27,7 +29,9 @@ Parameters:
     max_chamber_pressure_pa (double, read-only): commands above this are rejected whole.
     frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
     seed (int, read-only): noise seed, -1 for a random one.
-    camera.* : the simulated camera (``inflarm_hw.nodes.camera_publisher.CAMERA_PARAMETERS``).
+    camera.* : the simulated camera (``inflarm_hw.nodes.camera_publisher.CAMERA_PARAMETERS``),
+        among them camera.transport (string, read-only: raw or compressed) and
+        camera.jpeg_quality (int, 1-100).
 """
 
 import dataclasses

@@ -40,18 +40,39 @@ For the 4:2:2 encodings the array is ``(height, width, 2)`` bytes, two per pixel
 returns them; ``width`` must be even. Every problem (unknown encoding, empty image, ``step``
 too small, data not ``step * height`` bytes, an array that does not fit the encoding) is a
 ``ValueError`` that says what is wrong.
+
+``sensor_msgs/CompressedImage``, as ``image_transport``'s ``compressed`` transport carries it:
+
+- `compressed_to_bgr(msg)`: the decoded 8-bit BGR array (``cv2.imdecode`` on a view of
+  ``msg.data``: the decode is the only copy). ``format`` is image_transport's
+  ``"<encoding>; jpeg compressed <encoding>"`` (or ``png``) or a bare ``jpeg`` / ``png``, as
+  camera drivers write it; the data must be of that format (JPEG or PNG signature).
+- `bgr_to_compressed(image, fmt='jpeg', quality=90, header=None)`: a message with
+  image_transport's format string, JPEG at ``quality`` (OpenCV's default 4:2:0 chroma
+  subsampling, libjpeg's default) or PNG.
+- `compressed_format(fmt)`: ``'jpeg'`` or ``'png'`` from a ``format`` string, else a
+  ``ValueError`` naming it.
 """
 
 import array
+import numbers
 import sys
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-__all__ = ['ENCODINGS', 'image_to_bgr', 'image_to_numpy', 'numpy_to_image']
+__all__ = [
+    'ENCODINGS',
+    'bgr_to_compressed',
+    'compressed_format',
+    'compressed_to_bgr',
+    'image_to_bgr',
+    'image_to_numpy',
+    'numpy_to_image',
+]
 
 ENCODINGS: dict[str, tuple[str, int]] = {
     'bgr8': ('u1', 3), 'rgb8': ('u1', 3), 'bgra8': ('u1', 4), 'rgba8': ('u1', 4),
@@ -196,5 +217,96 @@ def numpy_to_image(pixels: npt.ArrayLike, encoding: str,
                 step=a.shape[1] * channels * dtype.itemsize)
     if header is not None:
         msg.header = header
+    msg.data = data
+    return msg
+
+
+_SIGNATURES = {'jpeg': b'\xff\xd8\xff', 'png': b'\x89PNG\r\n\x1a\n'}
+_FORMAT_NAMES = {'jpeg': 'jpeg', 'jpg': 'jpeg', 'png': 'png'}
+
+
+def compressed_format(fmt: str) -> str:
+    """``'jpeg'`` or ``'png'``: the compression named by a ``CompressedImage.format``.
+
+    Accepts image_transport's ``"bgr8; jpeg compressed bgr8"`` / ``"mono16; png compressed"``
+    and a bare ``"jpeg"``, ``"jpg"`` or ``"png"`` (case-insensitive).
+
+    Raises
+    ------
+    ValueError
+        Any other format (``theora``, ``tiff``, ``compressedDepth``, empty).
+    """
+    text = str(fmt).strip().lower()
+    words = text.split(';', 1)[-1].split()
+    if words and words[0] in _FORMAT_NAMES and (len(words) == 1 or words[1] == 'compressed'):
+        return _FORMAT_NAMES[words[0]]
+    raise ValueError(f"unsupported compressed image format '{fmt}'; supported: jpeg, png "
+                     "(image_transport's compressed transport)")
+
+
+def compressed_to_bgr(msg: CompressedImage) -> npt.NDArray[np.uint8]:
+    """The 8-bit BGR image of a ``sensor_msgs/CompressedImage`` (JPEG or PNG).
+
+    An EXIF orientation tag is ignored: the array is the sensor's pixel grid.
+
+    Raises
+    ------
+    ValueError
+        An unsupported ``format``, empty data, data that is not of the declared format, or
+        bytes that do not decode (truncated, or corrupt headers). Damaged entropy-coded JPEG
+        data that libjpeg resynchronises on decodes, to a damaged image.
+    """
+    kind = compressed_format(msg.format)
+    data = np.frombuffer(msg.data, dtype=np.uint8)
+    if data.size == 0:
+        raise ValueError(f'empty {kind} data in a CompressedImage')
+    signature = _SIGNATURES[kind]
+    if data[:len(signature)].tobytes() != signature:
+        raise ValueError(f"CompressedImage data is not {kind} (format '{msg.format}'): it starts "
+                         f'with {data[:4].tobytes()!r}')
+    # the pixels as the sensor delivered them, which camera_info describes: an EXIF
+    # orientation tag does not rotate them (nor in image_transport's default mode, unchanged)
+    bgr = cv2.imdecode(data, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    if bgr is None:
+        raise ValueError(f'corrupt {kind} data: {data.size} bytes that OpenCV cannot decode')
+    return bgr
+
+
+def bgr_to_compressed(bgr: npt.ArrayLike, fmt: str = 'jpeg', quality: int = 90,
+                      header: Header | None = None) -> CompressedImage:
+    """A ``sensor_msgs/CompressedImage`` of an 8-bit BGR image.
+
+    Parameters
+    ----------
+    bgr : array-like, shape (height, width, 3), uint8
+    fmt : {'jpeg', 'png'}
+    quality : int
+        JPEG quality, 1-100 (ignored for PNG).
+    header : std_msgs.msg.Header, optional
+
+    Returns
+    -------
+    sensor_msgs.msg.CompressedImage
+        ``format`` as image_transport writes it: ``"bgr8; jpeg compressed bgr8"`` or
+        ``"bgr8; png compressed bgr8"``.
+    """
+    kind = compressed_format(fmt)
+    a = np.asarray(bgr)
+    if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8 or a.shape[0] == 0 \
+            or a.shape[1] == 0:
+        raise ValueError(f'expected a non-empty uint8 BGR array of shape (height, width, 3), '
+                         f'got {a.dtype} {a.shape}')
+    if isinstance(quality, bool) or not isinstance(quality, numbers.Integral) \
+            or not 1 <= quality <= 100:
+        raise ValueError(f'expected a JPEG quality integer in 1-100, got {quality!r}')
+    flags = [cv2.IMWRITE_JPEG_QUALITY, int(quality)] if kind == 'jpeg' else []
+    ok, encoded = cv2.imencode('.jpg' if kind == 'jpeg' else '.png', a, flags)
+    if not ok:
+        raise ValueError(f'OpenCV could not encode a {a.shape[1]}x{a.shape[0]} image as {kind}')
+    msg = CompressedImage(format=f'bgr8; {kind} compressed bgr8')
+    if header is not None:
+        msg.header = header
+    data = array.array('B')
+    data.frombytes(encoded.reshape(-1))
     msg.data = data
     return msg

@@ -3,11 +3,15 @@
 The vision sensor of ``001_b59ad71c956a1751`` (3.1, 3.3): every image goes through
 `inflarm_vision.pipeline.BallPipeline` (HSV candidates, sub-pixel outline, tracking region,
 3D centre from the outline and the ball's diameter with the camera_info intrinsics, then the
-camera -> mount transform). Processing happens in the image callback.
+camera -> mount transform). Processing happens in the image callback; raw and compressed
+images differ only in how they become a BGR array.
 
-Subscribes:
-    camera/image_raw (sensor_msgs/Image, SENSOR_QOS): bgr8, rgb8, bgra8, rgba8, mono8, the
-        16-bit and 4:2:2 encodings of ``inflarm_msgs_json.ros.image``.
+Subscribes (the images on one of the two topics, by ``transport``):
+    camera/image_raw (sensor_msgs/Image, SENSOR_QOS), ``transport`` raw: bgr8, rgb8, bgra8,
+        rgba8, mono8, the 16-bit and 4:2:2 encodings of ``inflarm_msgs_json.ros.image``.
+    camera/image_raw/compressed (sensor_msgs/CompressedImage, SENSOR_QOS), ``transport``
+        compressed: JPEG or PNG, as image_transport's compressed transport publishes them
+        (``inflarm_msgs_json.ros.image.compressed_to_bgr``).
     camera/camera_info (sensor_msgs/CameraInfo, SENSOR_QOS): intrinsics (plumb_bob or
         rational_polynomial), the latest valid one is used.
 Publishes:
@@ -19,6 +23,7 @@ Publishes:
         ``diagnostics_period_s``: images, detection rate, latency (now - image stamp at
         publication), processing time, rejected images, whole-frame searches.
 Parameters:
+    transport (string, read-only): ``raw`` (default) or ``compressed``: which image topic.
     detector.* : `inflarm_vision.tracker.DetectorParams` (HSV thresholds, radius range, shape
         limits), changeable at runtime.
     tracking.search_radii, tracking.search_margin_px (double): the tracking region.
@@ -29,7 +34,8 @@ Parameters:
     frame_id (string, read-only): frame of the published points.
     publish_debug_image (bool): publish ``~/debug_image``.
     diagnostics_period_s (double, read-only).
-Bad input (empty, truncated or wrongly sized images, unknown encodings, images before any
+Bad input (empty, truncated or wrongly sized images, unknown encodings, compressed data that
+does not decode or is not of its ``format``, unknown compressed formats, images before any
 camera_info or of another size than it, invalid camera_info) is rejected by the callback guards
 (``inflarm_msgs_json.ros.node``): a warning throttled per kind of problem, nothing published,
 the node keeps running.
@@ -43,10 +49,10 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from inflarm_model.camera import PinholeCamera
-from inflarm_msgs_json.ros.image import image_to_bgr, numpy_to_image
+from inflarm_msgs_json.ros.image import compressed_to_bgr, image_to_bgr, numpy_to_image
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
@@ -55,8 +61,16 @@ from inflarm_msgs_json.ros.spin import spin_node
 from inflarm_vision.pipeline import BallPipeline, settings_from_parameters
 from inflarm_vision.tracker import DetectorParams
 
+TRANSPORTS = {
+    'raw': (Image, 'camera/image_raw', image_to_bgr),
+    'compressed': (CompressedImage, 'camera/image_raw/compressed', compressed_to_bgr),
+}
+"""``transport`` -> (message type, topic, message -> BGR array); topics as image_transport's."""
+
 _D = DetectorParams()
 PARAMETERS = (
+    Parameter('transport', 'raw', "images as 'raw' (camera/image_raw) or 'compressed' "
+              '(camera/image_raw/compressed, jpeg or png)', read_only=True),
     Parameter('detector.hsv_lower', list(_D.hsv_lower),
               'lower HSV thresholds (H 0-180, S, V 0-255)'),
     Parameter('detector.hsv_upper', list(_D.hsv_upper), 'upper HSV thresholds'),
@@ -112,6 +126,10 @@ class BallTrackerNode(GuardedCallbacks, Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('ball_tracker', **kwargs)
         self.params = declare_parameters(self, PARAMETERS)
+        if self.params['transport'] not in TRANSPORTS:
+            raise ValueError(f"transport must be one of {list(TRANSPORTS)}, got "
+                             f"'{self.params['transport']}'")
+        image_type, self.image_topic, self.to_bgr = TRANSPORTS[self.params['transport']]
         self.pipeline = BallPipeline(settings_from_parameters(self.params))
         self.camera: PinholeCamera | None = None
         self.window = _Window()
@@ -122,13 +140,14 @@ class BallTrackerNode(GuardedCallbacks, Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, 'diagnostics', RELIABLE_QOS)
         self.create_guarded_subscription(CameraInfo, 'camera/camera_info', self.on_camera_info,
                                          SENSOR_QOS)
-        self.create_guarded_subscription(Image, 'camera/image_raw', self.on_image, SENSOR_QOS)
+        self.create_guarded_subscription(image_type, self.image_topic, self.on_image,
+                                         SENSOR_QOS)
         self.create_guarded_timer(self.params['diagnostics_period_s'], self.publish_diagnostics)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: tracking a {self.params['ball_diameter_m'] * 1000:.0f} mm yellow ball on "
-            f"camera/image_raw, publishing ball_position in {self.params['frame_id']}")
+            f"{self.image_topic}, publishing ball_position in {self.params['frame_id']}")
 
     # -- parameters ----------------------------------------------------------------------------
 
@@ -156,14 +175,15 @@ class BallTrackerNode(GuardedCallbacks, Node):
                 f'{camera.distortion_model}')
         self.camera = camera
 
-    def on_image(self, msg: Image) -> None:
-        """Image in, point out; a ValueError rejects the image (warned by the guard)."""
+    def on_image(self, msg: Image | CompressedImage) -> None:
+        """Image in (of the ``transport``), point out; a ValueError rejects the image (warned
+        by the guard)."""
         start = time.perf_counter()
         self.window.images += 1
         try:
             if self.camera is None:
                 raise InputError('no camera_info', 'no camera_info received yet')
-            bgr = image_to_bgr(msg)
+            bgr = self.to_bgr(msg)
             measurement = self.pipeline.process(bgr, self.camera)
         except ValueError:
             self.window.rejected += 1

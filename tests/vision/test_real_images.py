@@ -1,0 +1,47 @@
+"""The real-image set (real_scenes.py): what it is made of, and the detector on it.
+
+Its figures per condition are the benchmark's (``benchmarks/bench_vision.py``) and the vision
+README's; the tests hold what must never regress: no ball is ever found in the ball-free
+photographs, and the set is the scene it says at every JPEG quality."""
+
+import cv2
+import numpy as np
+import pytest
+from real_scenes import JPEG_QUALITIES, PHOTOS, ball_free_frame, photo, real_case
+
+from inflarm_vision.tracker import detect_ball
+
+
+def test_every_photograph_ships_in_an_installed_package_and_is_in_colour():
+    for name in PHOTOS:
+        image = photo(name)
+        assert image.ndim == 3 and image.shape[2] == 3 and min(image.shape[:2]) >= 300, name
+        # a photograph, not a flat image: its colours vary
+        assert image.reshape(-1, 3).std(axis=0).min() > 10.0, name
+
+
+def test_the_same_scene_comes_at_every_quality_with_the_ball_where_the_truth_says():
+    for seed in range(6):
+        cases = [real_case(seed, quality, occlusion=0.0) for quality in JPEG_QUALITIES]
+        assert all(np.array_equal(c.center, cases[0].center) for c in cases)
+        assert len({c.conditions.photo for c in cases}) == 1
+        png = cases[0].image.astype(float)
+        for case in cases[1:]:
+            # JPEG changes the pixels a little, never the scene
+            assert np.abs(case.image.astype(float) - png).mean() < 12.0
+        # the ball's inner disc is yellow in HSV: hue 17-38 of OpenCV's 0-180 (34-76 deg)
+        c, r = cases[0].center, cases[0].radius
+        hsv = cv2.cvtColor(cases[0].image, cv2.COLOR_BGR2HSV)
+        v, u = np.mgrid[:hsv.shape[0], :hsv.shape[1]]
+        inner = np.hypot(u - c[0], v - c[1]) < 0.5 * r
+        assert np.median(hsv[inner][:, 0]) == pytest.approx(27.0, abs=11.0)
+
+
+@pytest.mark.parametrize('quality', JPEG_QUALITIES)
+def test_no_ball_is_found_in_the_ball_free_photographs(quality):
+    found = []
+    for seed in range(30):
+        detection = detect_ball(ball_free_frame(seed, quality))
+        if detection is not None:
+            found.append((seed, detection.center.round(1), round(detection.radius, 1)))
+    assert found == []
