@@ -106,9 +106,9 @@ class DetectorParams:
     min_radius_px: float = 4.0
     max_radius_px: float = 150.0
     min_circularity: float = 0.6
-    min_fill: float = 0.85
+    min_fill: float = 0.6
     max_aspect_ratio: float = 1.3
-    min_confidence: float = 0.8
+    min_confidence: float = 0.6
     min_chroma: float = 20.0
     opening_px: int = 3
     max_candidates: int = 4
@@ -185,6 +185,14 @@ class BallDetection:
 
 _SATURATED = 250  # a channel at or above this is treated as clipped
 _STEP = 0.5  # sample spacing along the rays [px]
+_ACCEPT_SEPARATION = 1.6  # smallest separation of the ball from its surround (below: no ball)
+_MIN_SEPARATION = 2.0  # of the ball-blind channel, below which the best of all is tried
+_INSIDE_TOLERANCE = 0.35  # share of the edge's contrast a ray's inside level may be off
+_SAME_COLOUR = 0.97  # cosine of the angle within which a colour is the ball's
+_MIN_TOLERANCE_PX = 0.6  # smallest distance of an inlier from the fitted outline [px]
+_MAX_HIDDEN_ARC = 0.42  # share of the outline another thing may hide (the spec: 30 %)
+_COARSE_MIN_RADIUS_PX = 8.0  # smaller guesses: too few samples for the levels of the coarse pass
+_RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discriminant
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
@@ -326,13 +334,36 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     e = t0 + _STEP * k
     flat = signal.ravel()
     at = (np.arange(0, n_rays * n_t, n_t) + k)[:, None]  # flat index of each ray's edge sample
-    hi = _circular_mean(_line_at(flat[at + (gap + np.arange(length))], gap), valid)
+    beyond = flat[at + (gap + np.arange(length))]
+    # the window before the edge ends a gap inside it, or starts at the ray's first sample
+    start = -np.minimum(gap + length - 1, k)[:, None]
+    before = flat[at + (start + np.arange(length))]
+    start = start[:, 0]
+    hi = _circular_mean(_line_at(beyond, gap), valid)
     if inside_level is None:
-        start = -min(gap + length - 1, int(k.min()))
-        lo = _circular_mean(_line_at(flat[at + (start + np.arange(length))], start), valid)
+        lo = _circular_mean(_line_at(before, start), valid)
+    # a ray crosses the ball's edge only if it is still inside the ball before it: its own
+    # level there near the inside level (not where background lies on both sides of a
+    # texture edge: the cut of a half disc)
+    valid &= before.mean(axis=1) - lo <= _INSIDE_TOLERANCE * (hi - lo)
     edge = _crossing(_normalized(flat[at + np.arange(-gap, gap + 1)], lo, hi), e - _STEP * gap)
     edge = np.where(valid, edge, np.nan)
     return edge + sigma * sigma / (2.0 * edge), sigma
+
+
+def _fisher(inside: npt.NDArray, outside: npt.NDArray) -> npt.NDArray[np.float64]:
+    """Fisher's discriminant of two sets of samples (n, k): the unit weights ``w`` maximizing
+    the separation of ``outside @ w`` above ``inside @ w``."""
+    scatter = np.cov(inside.T) + np.cov(outside.T) + _RIDGE * np.eye(inside.shape[1])
+    w = np.linalg.solve(scatter, outside.mean(axis=0) - inside.mean(axis=0))
+    return w / max(np.linalg.norm(w), 1e-12)
+
+
+def _separation(inside: npt.NDArray, outside: npt.NDArray, weights: npt.NDArray) -> float:
+    """How well a channel separates two sets of BGR samples: the difference of their means
+    over the root of the sum of their variances."""
+    a, b = inside @ weights, outside @ weights
+    return float((b.mean() - a.mean()) / math.sqrt(a.var() + b.var() + 1e-6))
 
 
 def _ellipse_distance(fit, origin: npt.NDArray[np.float64],
@@ -353,62 +384,99 @@ def _ellipse_distance(fit, origin: npt.NDArray[np.float64],
     return (-qb + np.sqrt(np.maximum(qb * qb - qa * qc, 0.0))) / qa
 
 
+def _circles_through(a, b, c):
+    """Centres (n, 2) and radii (n,) of the circles through point triples (n, 2) each; NaN for
+    collinear triples."""
+    ab, ac = b - a, c - a
+    d = 2.0 * (ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
+    nb, nc = (ab * ab).sum(axis=1), (ac * ac).sum(axis=1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        ux = (ac[:, 1] * nb - ab[:, 1] * nc) / d
+        uy = (ab[:, 0] * nc - ac[:, 0] * nb) / d
+    centre = a + np.stack([ux, uy], axis=1)
+    return centre, np.hypot(ux, uy)
+
+
+def _circle_lsq(points):
+    """Least-squares circle (Kasa, then Gauss-Newton on the geometric distance): centre,
+    radius."""
+    x, y = points[:, 0], points[:, 1]
+    m = np.stack([x, y, np.ones_like(x)], axis=1)
+    sol = np.linalg.lstsq(m, x * x + y * y, rcond=None)[0]
+    c = 0.5 * sol[:2]
+    r = math.sqrt(max(sol[2] + c @ c, 1e-12))
+    for _ in range(3):
+        d = points - c
+        rho = np.hypot(d[:, 0], d[:, 1])
+        jac = np.concatenate([-d / rho[:, None], -np.ones((len(rho), 1))], axis=1)
+        step = np.linalg.lstsq(jac, -(rho - r), rcond=None)[0]
+        c, r = c + step[:2], r + step[2]
+    return c, float(r)
+
+
 def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64],
                  directions: npt.NDArray[np.float64], t: npt.NDArray[np.float64],
                  radius: float):
-    """Robust ellipse fit through the edge points: (fit, inlier mask) or None.
+    """Robust fit of the outline through the edge points: (fit, inlier mask) or None.
 
-    A fit through the edge points near the median distance, then one without the points
-    farther (along their ray) from it than 3 robust standard deviations (the tolerance kept
-    within [0.25, 0.5 + 0.03 r] px); the inliers are those within the tolerance of the second
-    fit."""
+    A consensus circle (circles through triples of edge points a third of the way round from
+    each other, the one most points lie near), then least squares through its points; the
+    inliers are those within 3 robust standard deviations (kept within [0.25, 0.5 + 0.03 r]
+    px). An outline found on 85 % of the rays or more is then fitted by an ellipse (the image
+    of a sphere off the optical axis), a partial one (occluded, or cut by texture) keeps the
+    circle. ``fit`` is OpenCV's ``((cx, cy), (width, height), angle_deg)``."""
     valid = np.isfinite(t)
-    # a first cut around the median distance (the outline is no more elongated than 1.4:1)
-    inliers = valid & (np.abs(t - _median(t[valid])) <= 0.2 * radius + 2.0) if valid.any() \
-        else valid
+    n = len(t)
+    if valid.sum() < 8:
+        return None
     cap = 0.5 + 0.03 * radius
-    fit = None
+    index = np.arange(n)
+    triples = np.stack([index, (index + n // 3) % n, (index + (2 * n) // 3) % n], axis=1)
+    triples = triples[valid[triples].all(axis=1)]
+    if len(triples) == 0:
+        return None
+    centres, radii = _circles_through(points[triples[:, 0]], points[triples[:, 1]],
+                                      points[triples[:, 2]])
+    pts = points[valid]
+    dist = np.hypot(pts[None, :, 0] - centres[:, None, 0], pts[None, :, 1] - centres[:, None, 1])
+    support = (np.abs(dist - radii[:, None]) <= cap).sum(axis=1)
+    support = np.where(np.isfinite(radii), support, -1)
+    best = int(np.argmax(support))
+    if support[best] < 8:
+        return None
+    residual = np.full(n, np.inf)
+    residual[valid] = np.hypot(*(points[valid] - centres[best]).T) - radii[best]
+    inliers = np.abs(residual) <= cap
     for _ in range(2):
+        c, r = _circle_lsq(points[inliers])
+        residual[valid] = np.hypot(*(points[valid] - c).T) - r
+        spread = _median(np.abs(residual[inliers] - _median(residual[inliers])))
+        tolerance = min(max(3.0 * 1.4826 * spread, _MIN_TOLERANCE_PX), cap)
+        fitted, inliers = inliers, np.abs(residual) <= tolerance
         if inliers.sum() < 8:
             return None
-        fit = cv2.fitEllipseDirect(points[inliers].astype(np.float32))
-        if not all(math.isfinite(x) for x in (*fit[0], *fit[1])) or min(fit[1]) <= 0.0:
-            return None
-        residual = np.full(len(t), np.inf)
-        residual[valid] = t[valid] - _ellipse_distance(fit, origin, directions[valid])
-        inner = residual[inliers]
-        spread = _median(np.abs(inner - _median(inner)))
-        tolerance = min(max(3.0 * 1.4826 * spread, 0.25), cap)
-        fitted = inliers
-        inliers = np.abs(residual) <= tolerance
         if np.array_equal(inliers, fitted):
-            break  # no point to drop: the fit stands
+            break
+    fit = ((float(c[0]), float(c[1])), (2.0 * r, 2.0 * r), 0.0)
+    if inliers.mean() >= 0.85:
+        ellipse = cv2.fitEllipseDirect(points[inliers].astype(np.float32))
+        if all(math.isfinite(x) for x in (*ellipse[0], *ellipse[1])) and min(ellipse[1]) > 0.0:
+            residual[valid] = t[valid] - _ellipse_distance(ellipse, origin, directions[valid])
+            fit, inliers = ellipse, np.abs(residual) <= tolerance
     return fit, inliers
-
-
-def _refine_blob(image: npt.NDArray[np.uint8], patch: npt.NDArray[np.uint8],
-                 blob: npt.NDArray[np.uint8], offset: npt.NDArray[np.float64], moments,
-                 params: DetectorParams,
-                 prior: BallDetection | None = None) -> BallDetection | None:
-    """Sub-pixel outline of one thresholded blob (`_refine_at` from its centroid and area).
-
-    ``patch`` and ``blob`` are the blob's bounding box in the image and its mask, ``offset``
-    the box's corner in the image, ``moments`` those of the blob's contour (box coordinates).
-    A ``prior`` detection (the last frame's) lends its colour (a warm start).
-    """
-    center = offset + (moments['m10'] / moments['m00'], moments['m01'] / moments['m00'])
-    r0 = math.sqrt(moments['m00'] / math.pi)
-    ball_bgr = _ball_colour(patch, blob) if prior is None else prior.colour_bgr
-    return _refine_at(image, center, r0, ball_bgr, params)
 
 
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
                ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
-               margin_px: float = 0.0, sigma: float | None = None) -> BallDetection | None:
+               margin_px: float = 0.0, sigma: float | None = None,
+               coarse: bool = False) -> BallDetection | None:
     """Sub-pixel outline of a ball of colour ``ball_bgr`` near ``center`` with a radius near
     ``r0`` [px]: rays from ``center``, their edges (`_edges`, searched within
-    ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust ellipse fit (`_fit_outline`). None if
-    the colour is unknown or too grey, or the inside of the outline is not of that colour."""
+    ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust fit (`_fit_outline`). ``coarse``: the
+    edges in the channel that best separates the ball from its surround whatever its shading
+    (to place a rough guess), else in the best ball-blind one. None if the colour is unknown or
+    too grey, the inside of the outline is not of that colour, or nothing around the ball
+    differs from it clearly."""
     if ball_bgr is None or np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma,
                                                                              1.0):
         return None
@@ -437,13 +505,36 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     inner = max(1, int((r0 - half_width - t0) / _STEP))
     if not (samples[:, :inner] @ chroma).mean() > 0.5 * strength:
         return None
-    # the ball-blind channel, unless the background is dark in it: then chroma
-    signal = samples @ blind
-    outer = (t > r0 + 0.5 * half_width) & (t <= r0 + half_width)
+    # the edge's signal: of the channels blind to the ball's colour (the plane orthogonal to
+    # it in BGR: 0 inside however the ball is shaded), the one that best separates the ball's
+    # samples from those around it (Fisher's discriminant in that plane); where nothing
+    # around differs from the ball but in brightness (a dark surround), the best channel of
+    # all, with the inside level measured
+    n_t = len(t)
+    outside_k = min(int((r0 + half_width - t0) / _STEP), n_t - 1)
+    inside = samples[:, :inner].reshape(-1, 3).astype(np.float32)
+    outside = samples[:, outside_k:].reshape(-1, 3).astype(np.float32)
+    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
+    # the ball's own samples: of its colour (not a highlight, not background where the ball is
+    # hidden or where the candidate is no ball)
+    along = inside @ unit
+    own = along > _SAME_COLOUR * np.sqrt(np.einsum('ij,ij->i', inside, inside))
+    if own.sum() < 8:
+        return None
+    inside = inside[own]
+    other = np.cross(unit, blind)
+    plane = np.stack([blind, other / np.linalg.norm(other)])  # (2, 3)
+    w2 = _fisher(inside @ plane.T, outside @ plane.T)
+    weights = (w2 @ plane).astype(np.float32)
     inside_level = 0.0
-    if not signal[:, outer].mean() > 0.25 * strength:
-        signal = -(samples @ chroma)
-        inside_level = None
+    separation = _separation(inside, outside, weights)
+    if coarse or separation < _MIN_SEPARATION:
+        full = _fisher(inside, outside).astype(np.float32)
+        if (full_separation := _separation(inside, outside, full)) > separation:
+            weights, inside_level, separation = full, None, full_separation
+    if separation < _ACCEPT_SEPARATION:
+        return None  # nothing around it differs from it clearly enough to be its edge
+    signal = samples @ weights
     edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma)
     directions = np.stack([cos, sin], axis=1)
     points = center + edge[:, None] * directions
@@ -451,6 +542,8 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     if result is None:
         return None
     fit, inliers = result
+    if not _one_hidden_arc(inliers):
+        return None
     (cx, cy), (fw, fh), angle = fit
     a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)
     major = math.radians(angle) if fw >= fh else math.radians(angle) + 0.5 * math.pi
@@ -461,67 +554,114 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
                          blur_px=sigma)
 
 
+def _one_hidden_arc(inliers: npt.NDArray[np.bool_]) -> bool:
+    """Whether the rays off the outline (round the ball, in order) are what a ball partly
+    hidden by one thing leaves: at most one long run of them (over a tenth of the rays), of at
+    most `_MAX_HIDDEN_ARC` of the rays; short runs are texture and highlights. A bar of the
+    ball's colour (two long runs), or a half disc (one of half the rays), is no ball."""
+    n = len(inliers)
+    if inliers.all():
+        return True
+    start = int(np.argmax(inliers))  # an inlier: no run is cut at the array's ends
+    off = ~np.roll(inliers, -start)
+    edges = np.diff(np.concatenate([[0], off.astype(np.int8), [0]]))
+    runs = np.nonzero(edges == -1)[0] - np.nonzero(edges == 1)[0]
+    long_runs = runs[runs > max(2, 0.1 * n)]
+    return len(long_runs) <= 1 and (len(long_runs) == 0 or long_runs[0] <= _MAX_HIDDEN_ARC * n)
+
+
 def _accept(detection: BallDetection | None, params: DetectorParams) -> bool:
     return (detection is not None and detection.confidence >= params.min_confidence
             and detection.axes[0] <= params.max_aspect_ratio * detection.axes[1]
             and params.min_radius_px <= detection.radius <= params.max_radius_px)
 
 
-def _elliptic(contour: npt.NDArray[np.int32], max_aspect_ratio: float) -> bool:
-    """Whether a blob's pixel contour is close to an ellipse that is not too elongated: no
-    point farther than ``1 + 0.12 r`` px from the ellipse fitted through them (squares,
-    triangles and half discs are farther), an axis ratio within 1.15 times the limit."""
-    if len(contour) < 6:
-        return True  # a few pixels: left to the sub-pixel fit
-    (cx, cy), (w, h), angle = cv2.fitEllipseDirect(contour)
-    if not (math.isfinite(w) and math.isfinite(h)) or min(w, h) <= 0.0:
-        return False
-    a, b = 0.5 * w, 0.5 * h
-    if max(a, b) > 1.15 * max_aspect_ratio * min(a, b) + 1.0:
-        return False
-    c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-    d = contour[:, 0, :] - (cx, cy)
-    rho = np.hypot((c * d[:, 0] + s * d[:, 1]) / a, (c * d[:, 1] - s * d[:, 0]) / b)
-    radius = math.sqrt(a * b)
-    return float(np.abs(rho - 1.0).max()) * radius <= 1.0 + 0.12 * radius
+def _disc_colour(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], radius: float,
+                 params: DetectorParams) -> npt.NDArray | None:
+    """`_ball_colour` of the thresholded pixels within ``0.75 radius`` of ``center``."""
+    h, w = image.shape[:2]
+    reach = max(1.0, 0.75 * radius)
+    u0, v0 = max(int(center[0] - reach), 0), max(int(center[1] - reach), 0)
+    u1, v1 = min(int(center[0] + reach) + 2, w), min(int(center[1] + reach) + 2, h)
+    if u1 - u0 < 1 or v1 - v0 < 1:
+        return None
+    patch = image[v0:v1, u0:u1]
+    disc = np.zeros(patch.shape[:2], np.uint8)
+    cv2.circle(disc, (int(round((center[0] - u0) * 16)), int(round((center[1] - v0) * 16))),
+               int(round(reach * 16)), 255, cv2.FILLED, cv2.LINE_8, shift=4)
+    return _ball_colour(patch, disc & _threshold(patch, params))
 
 
-def _blobs(mask: npt.NDArray[np.uint8], scale: float, min_radius_px: float,
-           params: DetectorParams) -> list[tuple[float, npt.NDArray[np.int32], dict]]:
-    """Contours of the mask that may be the ball, best shape first: (score, contour, moments).
+def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
+            params: DetectorParams, margin_px: float, colour: npt.NDArray | None = None,
+            sigma: float | None = None) -> BallDetection | None:
+    """The ball's outline from a rough centre and radius: `_refine_at` with a search window
+    widened by ``margin_px`` (the uncertainty of the guess), then again from that outline's
+    centre and radius with the narrow window. ``colour`` is the ball's (measured on the disc
+    when not given)."""
+    if colour is None:
+        colour = _disc_colour(image, center, r0, params)
+    first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
+                       coarse=r0 >= _COARSE_MIN_RADIUS_PX)
+    if first is None:
+        return None
+    # the outline measured again with rays from its own centre: from an off-centre start the
+    # rays meet a part of the outline more often than its share of it
+    return _refine_at(image, first.center, first.radius, colour, params, sigma=sigma)
 
-    ``scale`` is the mask's pixel size in image pixels; the area must fit the radius range
-    (from ``min_radius_px``), the circularity and the fill (area not in holes) be high enough.
-    """
-    contours, hierarchy = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+
+def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], scale: float,
+                min_radius_px: float,
+                params: DetectorParams) -> list[tuple[float, npt.NDArray[np.float64], float]]:
+    """Where the ball may be in a colour mask of pixel size ``scale`` [image px]:
+    ``(score, centre, radius)`` in mask pixels, best first.
+
+    Each blob's holes are filled (a highlight punches one). A round blob gives its centroid and
+    the radius of its area; any blob also gives the largest disc inside it (the peak of its
+    distance transform), which finds the ball when it touches something of its colour or is
+    partly hidden. Blobs of an area outside the radius range, or mostly holes (rings), are
+    no candidates. The score is the shape's (circularity, or the share of the blob the disc
+    fills) times the square of the blob's mean saturation: a yellow ball's saturation does
+    not change with its shading, while yellowish surroundings (wood, sand, skin) are paler."""
+    contours, hierarchy = cv2.findContours(mask, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_SIMPLE)
     if hierarchy is None:
         return []
     parents = hierarchy[0][:, 3]
-    min_area = 0.5 * math.pi * (min_radius_px / scale) ** 2
-    max_area = 1.5 * math.pi * (params.max_radius_px / scale) ** 2
+    min_area = 0.4 * math.pi * (min_radius_px / scale) ** 2
+    max_area = 4.0 * math.pi * (params.max_radius_px / scale) ** 2
     holes: dict[int, float] = {}
     for i in np.nonzero(parents >= 0)[0]:
         holes[parents[i]] = holes.get(parents[i], 0.0) + cv2.contourArea(contours[i])
-    blobs = []
+    found = []
+    min_peak = 0.5 * min_radius_px / scale
     for i in np.nonzero(parents < 0)[0]:
         contour = contours[i]
         moments = cv2.moments(contour)
         area = moments['m00']
-        if not (min_area <= area <= max_area):
+        if area < min_area or 1.0 - holes.get(i, 0.0) / max(area, 1e-9) < params.min_fill:
             continue
-        # the contour of a digital disc runs through its outer pixels' centres: for blobs of a
-        # few pixels compare the area with the enclosing circle's instead of the perimeter's
-        perimeter = cv2.arcLength(contour, True)
-        circularity = 4.0 * math.pi * area / perimeter ** 2 if perimeter > 0.0 else 0.0
-        if area < 30.0:
-            _, radius = cv2.minEnclosingCircle(contour)
-            circularity = max(circularity, area / (math.pi * radius * radius))
-        fill = 1.0 - holes.get(i, 0.0) / area
-        if (circularity >= params.min_circularity and fill >= params.min_fill
-                and _elliptic(contour, params.max_aspect_ratio)):
-            blobs.append((circularity * fill, contour, moments))
-    blobs.sort(key=lambda blob: -blob[0])
-    return blobs
+        x, y, bw, bh = cv2.boundingRect(contour)
+        blob = np.zeros((bh + 2, bw + 2), np.uint8)
+        cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(1 - x, 1 - y))
+        vivid = (cv2.mean(saturation[y:y + bh, x:x + bw], mask=blob[1:-1, 1:-1])[0] / 255.0) ** 2
+        if area <= max_area:
+            perimeter = cv2.arcLength(contour, True)
+            circularity = 4.0 * math.pi * area / perimeter ** 2 if perimeter > 0.0 else 0.0
+            if area < 30.0:
+                _, radius = cv2.minEnclosingCircle(contour)
+                circularity = max(circularity, area / (math.pi * radius * radius))
+            if circularity >= params.min_circularity:
+                centroid = np.array([moments['m10'], moments['m01']]) / area
+                found.append((circularity * vivid, centroid, math.sqrt(area / math.pi)))
+                if circularity >= 0.85:
+                    continue  # a disc: its centroid is the better guess
+        distance = cv2.distanceTransform(blob, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        _, peak, _, (pu, pv) = cv2.minMaxLoc(distance)
+        if min_peak <= peak <= params.max_radius_px / scale:
+            found.append(((0.5 * min(1.0, math.pi * peak * peak / area) + 0.1) * vivid,
+                          np.array([pu + x - 1.0, pv + y - 1.0]), peak + 0.5))
+    found.sort(key=lambda c: -c[0])
+    return found
 
 
 def _threshold(bgr: npt.NDArray[np.uint8], params: DetectorParams) -> npt.NDArray[np.uint8]:
@@ -540,59 +680,71 @@ def _check_image(bgr) -> npt.NDArray[np.uint8]:
     return image
 
 
-def refine_in_region(bgr_image: npt.ArrayLike, region: tuple[int, int, int, int],
-                     params: DetectorParams = DetectorParams(),  # noqa: B008 (frozen)
-                     near: npt.ArrayLike | None = None, prior: BallDetection | None = None,
-                     max_blobs: int | None = None) -> BallDetection | None:
-    """Detect the ball inside a region of the image, at full resolution.
-
-    Parameters
-    ----------
-    bgr_image : ndarray, shape (height, width, 3), uint8
-    region : tuple of 4 int
-        ``(u0, v0, u1, v1)``: columns ``u0 <= u < u1``, rows ``v0 <= v < v1``, clipped to the
-        image. The ball's blob must lie in it; its edge is sampled in the whole image.
-    params : DetectorParams
-    near : array-like, shape (2,), optional
-        Expected centre [px]: blobs are tried in order of distance from it (default: best
-        shape first).
-    prior : BallDetection, optional
-        The ball's last detection: its colour is used instead of measuring it (tracking).
-    max_blobs : int, optional
-        Number of blobs tried (default ``params.max_candidates``).
-
-    Returns
-    -------
-    BallDetection or None
-        The first accepted blob, in image pixel coordinates.
-    """
-    image = _check_image(bgr_image)
+def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
+            params: DetectorParams, near: npt.ArrayLike | None = None,
+            prior: BallDetection | None = None) -> BallDetection | None:
+    """The candidates of ``region`` (decimated as `DetectorParams.decimation` says) refined
+    at full resolution: the accepted one of highest confidence (or, with ``near``, the first
+    accepted in order of distance from it)."""
     h, w = image.shape[:2]
     u0, v0, u1, v1 = (int(x) for x in region)
     u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
     if u1 - u0 < 3 or v1 - v0 < 3:
         return None
     roi = image[v0:v1, u0:u1]
-    mask = _threshold(roi, params)
-    # at full resolution the threshold may keep a little less than the ball
-    blobs = _blobs(mask, 1.0, 0.5 * params.min_radius_px, params)
+    s = params.decimation if min(roi.shape[:2]) >= 8 * params.decimation else 1
+    small = roi if s == 1 else cv2.resize(roi, ((u1 - u0) // s, (v1 - v0) // s),
+                                          interpolation=cv2.INTER_AREA)
+    hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
+    mask = cv2.inRange(hsv, params.hsv_lower, params.hsv_upper)
+    if params.opening_px > 1 and params.min_radius_px / s >= params.opening_px:
+        kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+    candidates = _candidates(mask, hsv[:, :, 1], s, params.min_radius_px, params)
+    # pixel i of the decimated image covers image pixels s i .. s i + s - 1
+    guesses = [(np.array([u0, v0]) + s * centre + 0.5 * (s - 1), s * radius)
+               for _, centre, radius in candidates]
     if near is not None:
-        tx, ty = np.asarray(near, dtype=float) - (u0, v0)
-        blobs.sort(key=lambda blob: math.hypot(blob[2]['m10'] / blob[2]['m00'] - tx,
-                                               blob[2]['m01'] / blob[2]['m00'] - ty))
-    for _, contour, _ in blobs[:params.max_candidates if max_blobs is None else max_blobs]:
-        x, y, bw, bh = cv2.boundingRect(contour)
-        # this blob alone (not its neighbours in the box), without its holes
-        blob = np.zeros((bh, bw), np.uint8)
-        cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(-x, -y))
-        blob &= mask[y:y + bh, x:x + bw]
-        moments = cv2.moments(contour - (x, y))
-        detection = _refine_blob(image, roi[y:y + bh, x:x + bw], blob,
-                                 np.array([u0 + x, v0 + y], dtype=float), moments, params,
-                                 prior)
-        if _accept(detection, params):
+        target = np.asarray(near, dtype=float)
+        guesses.sort(key=lambda g: float(np.hypot(*(g[0] - target))))
+    best = None
+    for centre, radius in guesses[:params.max_candidates]:
+        detection = _refine(image, centre, radius, params, margin_px=0.25 * radius + s,
+                            colour=None if prior is None else prior.colour_bgr)
+        if not _accept(detection, params):
+            continue
+        if near is not None:
             return detection
-    return None
+        if best is None or detection.confidence > best.confidence:
+            best = detection
+    return best
+
+
+def refine_in_region(bgr_image: npt.ArrayLike, region: tuple[int, int, int, int],
+                     params: DetectorParams = DetectorParams(),  # noqa: B008 (frozen)
+                     near: npt.ArrayLike | None = None,
+                     prior: BallDetection | None = None) -> BallDetection | None:
+    """Detect the ball inside a region of the image.
+
+    Parameters
+    ----------
+    bgr_image : ndarray, shape (height, width, 3), uint8
+    region : tuple of 4 int
+        ``(u0, v0, u1, v1)``: columns ``u0 <= u < u1``, rows ``v0 <= v < v1``, clipped to the
+        image. The ball's colour blob must lie in it; its edge is sampled in the whole image.
+    params : DetectorParams
+    near : array-like, shape (2,), optional
+        Expected centre [px]: candidates are tried in order of distance from it, and the
+        first accepted is returned (default: the accepted one of highest confidence).
+    prior : BallDetection, optional
+        The ball's last detection: its colour is used instead of measuring it (tracking).
+
+    Returns
+    -------
+    BallDetection or None
+        In image pixel coordinates.
+    """
+    return _search(_check_image(bgr_image), region, params, near, prior)
 
 
 def detect_ball(bgr_image: npt.ArrayLike,
@@ -612,40 +764,7 @@ def detect_ball(bgr_image: npt.ArrayLike,
         The accepted candidate of highest confidence, or None if there is no yellow ball.
     """
     image = _check_image(bgr_image)
-    h, w = image.shape[:2]
-    s = params.decimation if min(h, w) >= 8 * params.decimation else 1
-    small = image if s == 1 else cv2.resize(image, (w // s, h // s),
-                                            interpolation=cv2.INTER_AREA)
-    mask = _threshold(small, params)
-    if params.opening_px > 1:
-        kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
-    best = None
-    for _, contour, moments in _blobs(mask, s, params.min_radius_px,
-                                      params)[:params.max_candidates]:
-        # the outline straight from the candidate (its centroid and area in the decimated
-        # image), else from its blob thresholded again at full resolution
-        x, y, bw, bh = cv2.boundingRect(contour)
-        blob = np.zeros((bh, bw), np.uint8)
-        cv2.drawContours(blob, [contour], -1, 255, cv2.FILLED, offset=(-x, -y))
-        blob &= mask[y:y + bh, x:x + bw]
-        # pixel i of the decimated image covers image pixels s i .. s i + s - 1
-        center = s * np.array([moments['m10'], moments['m01']]) / moments['m00'] + 0.5 * (s - 1)
-        patch = image[y * s:(y + bh) * s, x * s:(x + bw) * s]
-        if s > 1:  # the colour from full-resolution pixels: fewer are mixed with others
-            blob = cv2.resize(blob, (patch.shape[1], patch.shape[0]),
-                              interpolation=cv2.INTER_NEAREST) & _threshold(patch, params)
-        colour = _ball_colour(patch, blob)
-        detection = _refine_at(image, center, s * math.sqrt(moments['m00'] / math.pi), colour,
-                               params, margin_px=float(s))
-        if not _accept(detection, params):
-            margin = 0.25 * max(bw, bh) * s + 2 * s + 4
-            region = (int(x * s - margin), int(y * s - margin), int((x + bw) * s + margin),
-                      int((y + bh) * s + margin))
-            detection = refine_in_region(image, region, params, near=center, max_blobs=1)
-        if detection is not None and (best is None or detection.confidence > best.confidence):
-            best = detection
-    return best
+    return _search(image, (0, 0, image.shape[1], image.shape[0]), params)
 
 
 class BallTracker:
@@ -706,16 +825,16 @@ class BallTracker:
                         else 0.5 * (last.center - self._previous))
             self._frames += 1
             sigma = None if self._frames % 16 == 0 else last.blur_px
-            detection = _refine_at(image, last.center + velocity, last.radius, last.colour_bgr,
-                                   self.params, margin_px=1.0 + float(np.hypot(*velocity)),
-                                   sigma=sigma)
+            # the predicted outline is the fine pass's guess already
+            detection = _refine_at(image, last.center + velocity, last.radius,
+                                   last.colour_bgr, self.params,
+                                   margin_px=1.0 + float(np.hypot(*velocity)), sigma=sigma)
             if not _accept(detection, self.params):
                 half = self.search_radii * last.radius + self.search_margin_px
                 u, v = last.center + velocity
                 region = (int(math.floor(u - half)), int(math.floor(v - half)),
                           int(math.ceil(u + half)) + 1, int(math.ceil(v + half)) + 1)
-                detection = refine_in_region(image, region, self.params, near=(u, v),
-                                             prior=last)
+                detection = _search(image, region, self.params, near=(u, v), prior=last)
         if detection is None:
             self.full_frame_searches += 1
             detection = detect_ball(image, self.params)
