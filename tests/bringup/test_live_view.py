@@ -253,6 +253,18 @@ def colour_pixels(png: bytes, width_share: float = 0.62) -> dict[str, int]:
     return {'yellow': int(yellow.sum()), 'blue': int(blue.sum())}
 
 
+def write_small_png(png: bytes, path: pathlib.Path, width: int = 960) -> None:
+    """The screenshot scaled to ``width`` with a 256-colour palette: small enough for git."""
+    import io
+
+    from PIL import Image
+    image = Image.open(io.BytesIO(png)).convert('RGB')
+    image = image.resize((width, round(image.height * width / image.width)), Image.LANCZOS)
+    path.parent.mkdir(exist_ok=True)
+    image.quantize(256, dither=Image.Dither.NONE).save(path, optimize=True)
+    assert path.stat().st_size < 200_000, path.stat().st_size
+
+
 @pytest.fixture
 def chromium():
     if find_chromium() is None:
@@ -306,9 +318,7 @@ def test_the_page_shows_the_scene_and_its_control_publishes_a_plan_request(
             shots[-1])
         assert drawn, f'the scene is not drawn: {colour_pixels(shots[-1])}'
         if os.environ.get('INFLARM_WRITE_DOC_SCREENSHOT'):
-            DOC_SCREENSHOT.parent.mkdir(exist_ok=True)
-            small = cv2.imdecode(np.frombuffer(shots[-1], np.uint8), cv2.IMREAD_COLOR)
-            cv2.imwrite(str(DOC_SCREENSHOT), small, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+            write_small_png(shots[-1], DOC_SCREENSHOT)
         assert 'Controls are enabled' in chromium.evaluate('document.body.innerText')
         # Served offline: the page asked nothing of any other host.
         foreign = [u for u in chromium.requests
