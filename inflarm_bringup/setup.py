@@ -24,6 +24,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'live_view = inflarm_bringup.executables:live_view',
             'inflarm-launch = inflarm_bringup.launcher:main',
             'inflarm-demo = inflarm_bringup.demo:main',
             'inflarm-build-knowledge = inflarm_bringup.knowledge_cli:main',

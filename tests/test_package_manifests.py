@@ -32,7 +32,7 @@ ROSDEP_KEYS = {
 }
 # PyPI-only modules with no rosdep key we could verify: installed from requirements.txt, named in
 # a comment of the package.xml instead of a key rosdep could not resolve.
-PYPI_ONLY = {'cobs'}
+PYPI_ONLY = {'cobs', 'viser', 'websockets'}
 # ROS packages whose Python module has the package's own name.
 ROS_PACKAGES = {
     'rclpy', 'ament_index_python', 'builtin_interfaces', 'std_msgs', 'std_srvs',
@@ -59,10 +59,9 @@ def started_packages(package: str) -> set[str]:
     """Packages whose executables ``package`` starts: the bringup's systems and RViz."""
     if package != 'inflarm_bringup':
         return set()
-    from inflarm_bringup.systems import SYSTEMS, Backend, visualization_nodes
-
+    from inflarm_bringup.systems import SYSTEMS, Backend, live_view_node, visualization_nodes
     nodes = [n for make in SYSTEMS.values() for kind in ('sim', 'sim_mcu')
-             for n in make(Backend(kind, '/tmp/mcu'))]
+             for n in make(Backend(kind, '/tmp/mcu'))] + [live_view_node()]
     return {n.package for n in (*nodes, *visualization_nodes())} - {package}
 
 

@@ -1,6 +1,7 @@
 """``inflarm-demo``: the whole simulated system, end to end, in under three minutes.
 
-    inflarm-demo [--out DIR] [--backend sim|sim_mcu] [--timeout S]
+    inflarm-demo [--out DIR] [--backend sim|sim_mcu] [--timeout S] [--view]
+                 [--bag-storage sqlite3|mcap]
 
 Starts the ``sim`` system (``inflarm_bringup.systems``: both simulated arms, the camera, the
 tracker, the planner, the estimator and both controllers) as processes over DDS, records a bag,
@@ -29,6 +30,11 @@ region), ``soft_arm_clearance.png`` (Fig 12: distance to the obstacle surface ag
 ``inflatable_arm_tip.png`` (the tip's path and its error), ``inflatable_arm_motors.png``
 (Fig 11 of 000: motor angles with and without deflection compensation), ``nodes.log`` (every
 node's output) and ``bag/`` (rosbag2). Exit code 0 when every target of the table is met.
+
+``--bag-storage mcap`` records the bag as MCAP, which Foxglove opens directly.
+
+``--view`` also starts the live view (``live_view``, ``http://127.0.0.1:8080``) to watch the
+missions in a browser; its controls are live, so steering the arms there can miss the targets.
 """
 
 import argparse
@@ -45,7 +51,14 @@ import time
 import numpy as np
 
 from inflarm_bringup.processes import NodeProcess, ProcessGroup, ros_environment
-from inflarm_bringup.systems import Backend, system_nodes
+from inflarm_bringup.systems import (
+    VIEW_HOST,
+    VIEW_PORT,
+    Backend,
+    live_view_node,
+    live_view_url,
+    system_nodes,
+)
 from inflarm_control.path_following import project_on_polyline
 
 SOFT_START = (0.0, 0.130, 0.710)  # the paper's start and goal [m], sra_mount
@@ -543,6 +556,14 @@ def main(argv: list[str] | None = None) -> int:
                         help='the robots: simulators, or the bridge on a simulated MCU')
     parser.add_argument('--timeout', type=float, default=170.0,
                         help='give up after this long [s] (default %(default)s)')
+    parser.add_argument('--bag-storage', default='sqlite3', choices=('sqlite3', 'mcap'),
+                        help="the bag's storage (default %(default)s; mcap for Foxglove)")
+    parser.add_argument('--view', action='store_true',
+                        help='also the live view of both arms in a browser')
+    parser.add_argument('--view-host', default=VIEW_HOST,
+                        help='address the view serves on (default %(default)s)')
+    parser.add_argument('--view-port', type=int, default=VIEW_PORT,
+                        help='port of the view (default %(default)s)')
     args = parser.parse_args(argv)
     out = pathlib.Path(args.out)
     if out.exists():
@@ -560,7 +581,12 @@ def main(argv: list[str] | None = None) -> int:
                   if n.executable == 'pressure_controller' else n
                   for n in system_nodes('sim', Backend(args.backend, port))) + (
         NodeProcess('inflarm_hw', 'bag_recorder', parameters={
-            'topics': list(RECORDED_TOPICS), 'output': str((out / 'bag').resolve())}),)
+            'topics': list(RECORDED_TOPICS), 'output': str((out / 'bag').resolve()),
+            'storage': args.bag_storage}),)
+    if args.view:
+        view = live_view_node(Backend(args.backend, port), args.view_host, args.view_port)
+        nodes += (view,)
+        print(f'[demo] live view: {live_view_url(view)}', flush=True)
     print(f'[demo] starting {len(nodes)} nodes (their output: {out / "nodes.log"})', flush=True)
     with open(out / 'nodes.log', 'w') as log:
         group = ProcessGroup(output=log)

@@ -3,6 +3,7 @@
     inflarm-launch [SYSTEM] [--backend sim|sim_mcu|hardware] [--port DEVICE]
                    [--on-exit stop|restart|ignore] [--in-process] [--duration S]
                    [--log-level LEVEL] [--rviz] [--camera-transport raw|compressed]
+                   [--view] [--view-host HOST] [--view-port PORT]
 
 Each node of the system (``inflarm_bringup.systems``) runs as its own process with its
 parameter files, its output prefixed by its name. Ctrl-C or SIGTERM (or the end of
@@ -18,6 +19,9 @@ exited cleanly and none died.
 ``--camera-transport`` sends the camera images raw or JPEG-compressed: it sets the simulated
 camera's ``camera.transport`` and ``ball_tracker``'s ``transport`` (default: as their parameter
 files say, raw).
+
+``--view`` adds the live view (``live_view``: both arms in a browser, with controls on the
+simulated backends) and prints its URL; ``--view-host 0.0.0.0`` serves it to the network.
 
 ``--rviz`` adds ``robot_state_publisher``, the static frames and RViz
 (`inflarm_bringup.systems.visualization_nodes`), from a ROS 2 Jazzy install.
@@ -39,8 +43,12 @@ from inflarm_bringup.systems import (
     BACKENDS,
     CAMERA_TRANSPORTS,
     SYSTEMS,
+    VIEW_HOST,
+    VIEW_PORT,
     VISUALIZATION_PACKAGES,
     backend,
+    live_view_node,
+    live_view_url,
     system_nodes,
     visualization_nodes,
 )
@@ -160,12 +168,26 @@ def main(argv: list[str] | None = None) -> int:
                         help="camera images as sensor_msgs/Image ('raw') or JPEG "
                              "CompressedImage ('compressed'), from the simulated camera to "
                              'ball_tracker (default: as configured, raw)')
+    parser.add_argument('--view', action='store_true',
+                        help='also the live view: both arms in a browser, with controls on the '
+                             'simulated backends')
+    parser.add_argument('--view-host', default=VIEW_HOST,
+                        help="address the view serves on (default %(default)s; '0.0.0.0': the "
+                             'network: its controls can move an arm)')
+    parser.add_argument('--view-port', type=int, default=VIEW_PORT,
+                        help='port of the view (default %(default)s)')
     args = parser.parse_args(argv)
     try:
-        nodes = system_nodes(args.system, backend(args.backend, args.port), args.log_level,
-                             args.camera_transport)
+        robots = backend(args.backend, args.port)
+        nodes = system_nodes(args.system, robots, args.log_level, args.camera_transport)
     except ValueError as error:
         parser.error(str(error))
+    if args.view:
+        view = live_view_node(robots, args.view_host, args.view_port)
+        nodes += (view,)
+        controls = ('controls enabled' if view.parameters['controls_enabled']
+                    else 'controls disabled: hardware')
+        print(f'[launch] live view: {live_view_url(view)} ({controls})', flush=True)
     if args.rviz:
         if args.in_process:
             parser.error('--rviz starts RViz and robot_state_publisher as processes: '

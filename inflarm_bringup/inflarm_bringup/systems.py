@@ -24,6 +24,9 @@ Camera transport (``--camera-transport``): ``raw`` or ``compressed`` sets the si
 that the images go as ``sensor_msgs/Image`` or as JPEG ``sensor_msgs/CompressedImage``; not
 given, the nodes' parameter files decide (raw).
 
+The live view (`live_view_node`, ``--view``): ``live_view`` serving both arms to a browser on
+``http://<host>:<port>``, with its controls enabled on the simulated backends only.
+
 Visualization (`visualization_nodes`, ``--rviz``): ``robot_state_publisher`` on the estimator's
 deflected pose, the static frames (``world`` -> ``base_link``, ``world`` -> ``sra_mount``) and
 ``rviz2`` with ``rviz/inflarm.rviz``: nodes of a ROS 2 Jazzy install, not of PyPI.
@@ -153,6 +156,26 @@ STATIC_FRAMES = (
 )
 """(parent, child, translation [m], rotation xyzw) of each static transform."""
 VISUALIZATION_PACKAGES = ('robot_state_publisher', 'tf2_ros', 'rviz2')
+
+
+VIEW_HOST, VIEW_PORT = '127.0.0.1', 8080
+
+
+def live_view_node(backend: Backend = Backend(), host: str = VIEW_HOST,  # noqa: B008
+                   port: int = VIEW_PORT) -> NodeProcess:
+    """The live view of a system on ``backend``: its controls command the simulators, never
+    hardware (set ``controls_enabled`` on the node to allow that)."""
+    return NodeProcess('inflarm_bringup', 'live_view', parameters={
+        'host': host, 'port': int(port), 'controls_enabled': backend.kind != 'hardware'})
+
+
+def live_view_url(node: NodeProcess) -> str:
+    """Where a browser finds the view of `live_view_node` (0.0.0.0: this machine's name)."""
+    host = node.parameters['host']
+    if host in ('0.0.0.0', '::', ''):
+        import socket
+        host = socket.gethostname()
+    return f"http://{host}:{node.parameters['port']}"
 
 
 def arm_parameters_from_file(path: str) -> dict:
