@@ -31,6 +31,7 @@ setup(
             'inflarm-estimate-bag = inflarm_bringup.bag_estimate:main',
             'inflarm-bag-regression = inflarm_bringup.bag_regression:main',
             'inflarm-sra-experiments = inflarm_bringup.sra_experiments:main',
+            'inflarm-repulsion-figure = inflarm_bringup.repulsion:main',
         ],
     },
 )

@@ -285,7 +285,10 @@ NODES = {
             lambda n, out: n.trial_active and n.task.trial_id == 3),
         'planned_path': (lambda n: path([(0.0, 0.0, 0.61), (0.05, 0.0, 0.62)], 'sra_mount', n),
                          lambda n, out: n.follower.active
-                         and n.follower.goal.tolist() == [0.05, 0.0, 0.62])}),
+                         and n.follower.goal.tolist() == [0.05, 0.0, 0.62]),
+        'obstacles': (
+            lambda n: to_string_msg(ObstacleSet('sra_mount', 0.03, (OBSTACLE.to_message(),))),
+            lambda n, out: len(n.follower.alert_regions) == 1)}),
     'trial_runner': NodeCase(TrialRunner, valid={
         'trial_report': (lambda n: _report(n), lambda n, out: n.trial == 1)}),
     'hw_bridge': NodeCase(HwBridge, prepare=start_sim_mcu, start=configure_and_activate, valid={

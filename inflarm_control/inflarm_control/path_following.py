@@ -22,7 +22,24 @@ differently, in three parts:
       e = r(s) - zeta_e
 
   and the signed outputs ``u`` driving the bellows pairs antagonistically around
-  ``bellows_preload`` (`antagonistic_pressures`), PEA1&2 with ``u_z``.
+  ``bellows_preload`` (`antagonistic_pressures`), PEA1&2 with ``u_z``;
+- the alert regions' repulsion (section 4.3.2: "the control algorithm adopted the repulsive
+  effect to keep the SRA's end out of the alert region"): while the measured end is inside an
+  obstacle's alert region (`set_alert_regions`), the PI's target is pulled from the reference
+  towards the region's border, to the weighted mean of the two::
+
+      target = (r(s) + k_rep q) / (1 + k_rep),   q = zeta_e + d(zeta_e)
+
+  with ``d`` the shortest way out (`inflarm_model.alert_regions.repulsive_offset`: along the
+  nearest face's outward normal, as long as the end is deep; 0 outside every region) and ``q``
+  the point of the border it leads to. So the push out of the region grows with the penetration
+  (``e = (r - zeta_e + k_rep d) / (1 + k_rep)``), a path running inside a region is followed
+  ``1 + k_rep`` times less deep, and the loop's gain towards the border stays the PI's (adding
+  ``k_rep d`` to the error instead would raise it ``1 + k_rep`` times, enough to set the loop
+  oscillating: ``inflarm_control/README.md``).
+  The reference's pace follows the distance to the target, so that it moves on while the end
+  is held out of a region (measured from the path, it would wait for ever where the path runs
+  inside one).
 
 Everything is pure numpy, one arm, no rclpy.
 """
@@ -34,6 +51,7 @@ import numpy as np
 import numpy.typing as npt
 
 from inflarm_control.pid_ilc import antagonistic_pressures, axis_outputs
+from inflarm_model.alert_regions import check_regions, repulsive_offset
 from inflarm_model.soft_arm import (
     CHAMBER_MAX_PRESSURE,
     CHAMBERS,
@@ -73,6 +91,10 @@ class PathFollowingParams:
         The feedforward's x and y outputs shrink by this much towards zero [Pa], >= 0: holding
         pressures learned under the quadrant rule (the knowledge database's) carry the valves'
         4 kPa dead zone, which the preloaded bellows never enter (`shrink_lateral_outputs`).
+    repulsion_gain : float
+        ``k_rep``: while the end is in an alert region, the PI's target is
+        ``(r + k_rep q) / (1 + k_rep)``, ``q`` the nearest point of the region's border, >= 0
+        (0: no repulsion).
     workspace : Workspace
         Bounds every waypoint must respect.
     """
@@ -86,6 +108,7 @@ class PathFollowingParams:
     stop_error: float = 0.004
     feedforward_lead: float = 0.0
     feedforward_dead_zone: float = 4e3
+    repulsion_gain: float = 1.0
     workspace: Workspace = WORKSPACE_POSITIVE
 
     def __post_init__(self) -> None:
@@ -113,6 +136,8 @@ class PathFollowingParams:
         if not (math.isfinite(self.feedforward_dead_zone) and self.feedforward_dead_zone >= 0.0):
             raise ValueError(
                 f'expected feedforward_dead_zone >= 0 Pa, got {self.feedforward_dead_zone}')
+        if not (math.isfinite(self.repulsion_gain) and self.repulsion_gain >= 0.0):
+            raise ValueError(f'expected repulsion_gain >= 0, got {self.repulsion_gain}')
 
 
 def shrink_lateral_outputs(outputs: npt.ArrayLike, dead_zone: float) -> npt.NDArray[np.float64]:
@@ -183,7 +208,8 @@ class PathFollower:
 
     Use: `start` with the path, the measured end and the pressures held now (the first outputs
     continue them: no jump), then `step` once per vision sample. After the reference reaches
-    the path's end the follower keeps holding the last waypoint.
+    the path's end the follower keeps holding the last waypoint. `set_alert_regions` gives the
+    obstacles' alert regions (at any time; none at first).
 
     Parameters
     ----------
@@ -203,6 +229,8 @@ class PathFollower:
         self._high = np.array([limit['B4'] - preload, limit['B3'] - preload, limit['PEA']])
         self._low = np.array([preload - limit['B2'], preload - limit['B1'], 0.0])
         self._active = False
+        self._regions = np.zeros((0, 2, 3))
+        self._repulsion = np.zeros(3)
 
     # -- state ---------------------------------------------------------------------------------
 
@@ -240,6 +268,17 @@ class PathFollower:
         """The path's last waypoint, shape (3,) [m]."""
         self._check_active()
         return self._path[-1].copy()
+
+    @property
+    def alert_regions(self) -> npt.NDArray[np.float64]:
+        """The alert regions repelling the end, shape (K, 2, 3) [m]."""
+        return self._regions.copy()
+
+    @property
+    def repulsion(self) -> npt.NDArray[np.float64]:
+        """The shortest way out of the alert regions at the last step's measured end, shape (3,)
+        [m] (`repulsive_offset`; 0 outside them)."""
+        return self._repulsion.copy()
 
     def _check_active(self) -> None:
         if not self._active:
@@ -314,6 +353,17 @@ class PathFollower:
             - self._kp * error
         self._command = held.copy()
 
+    def set_alert_regions(self, regions: npt.ArrayLike) -> None:
+        """Repel the end from these alert regions from the next step on.
+
+        Parameters
+        ----------
+        regions : array-like, shape (K, 2, 3)
+            Obstacles grown by their alert margin, min and max corners in ``sra_mount`` [m]
+            (`inflarm_model.alert_regions.grow_boxes`); K = 0: none.
+        """
+        self._regions = check_regions(regions).copy()
+
     def _nearest_arc(self, point: npt.NDArray[np.float64]) -> float:
         """Arc length of the path's point nearest to ``point``. A path planned from where the
         end was may arrive after it moved on (a trial still running): starting behind it, the
@@ -352,7 +402,12 @@ class PathFollower:
             return self._command.copy()
         y = _vector(end_point, 3, 'end_point', 'm')
         params = self.params
-        error = self._point(self._s) - y
+        lag = self._point(self._s) - y
+        self._repulsion = repulsive_offset(y, self._regions)
+        error = lag
+        if self._repulsion.any():  # the target (r + k q) / (1 + k), q = y + offset
+            k = params.repulsion_gain
+            error = (lag + k * self._repulsion) / (1.0 + k)
         integral = self._integral + self._ki * error * dt
         raw = self._feedforward(self._lead_arc()) + integral + self._kp * error
         output = np.clip(raw, self._low, self._high)

@@ -1,23 +1,31 @@
 """A* path planning of the soft arm's end around cuboid obstacles (section 4.1 of 001_...).
 
 ``plan_path(start, goal, obstacles, resolution, alert_margin)`` searches the grid of the work
-space (`inflarm_planning.free_space`) with 26-connected A* (open set, closed set, Fig 9) and
-returns the grid path, from the exact start to the exact goal, in ``sra_mount`` [m].
+space (`inflarm_planning.free_space`) with A* (open set, closed set, Fig 9) and returns the grid
+path, from the exact start to the exact goal, in ``sra_mount`` [m].
+
+Neighbours (``connectivity=``): the paper's "eight neighbouring points" are those of a planar
+grid, the 3 x 3 square around a point; in 3-D the same square is the 3 x 3 x 3 cube, 26
+neighbours (the default). 18 (faces and edges) and 6 (faces) are the smaller neighbourhoods,
+with longer paths (the README gives the lengths on the paper's scenario).
 
 Costs (``cost=``):
 
 - ``'length'`` (default): ``f = g + h``, ``g`` the length of the path so far, ``h`` the
-  Euclidean distance to the goal. ``h`` never overestimates the remaining length and drops by at
-  most a step's length per step (admissible and consistent), so the path is a shortest
-  26-connected grid path.
+  Euclidean distance to the goal. Every step of every neighbourhood is at least as long as the
+  Euclidean distance it covers, so ``h`` never overestimates the remaining length and drops by
+  at most a step's cost per step (admissible and consistent for 6, 18 and 26 neighbours): the
+  path is a shortest grid path of the neighbourhood.
 - ``'paper'``: eq. (7), ``P_cur = f_cur + g_cur`` with ``f_cur`` the Manhattan distance from
   the start and ``g_cur`` the Euclidean distance to the goal. We read ``f_cur`` as the
   Manhattan length of the path planned so far (the paper's reason for it: that part of the path
   "has been successfully planned"), which is the Manhattan distance from the start for every
   path that never turns back on an axis. A diagonal step then costs 2 or 3 instead of sqrt(2)
   or sqrt(3): the search minimises the Manhattan length, for which every staircase between two
-  points is equally short, so its path is a shortest one only by the tie-breaking. The README
-  gives both lengths on the paper's scenario.
+  points is equally short, so its path is a shortest one only by the tie-breaking. The
+  Euclidean ``g_cur`` is admissible and consistent for every neighbourhood (a step's Manhattan
+  length is at least its Euclidean length). The README gives both lengths on the paper's
+  scenario.
 
 The search is exact for its cost but looks only where it has to: with an upper bound ``C`` of
 the path cost, every cell the search expands has ``|n - start| + |n - goal| <= C`` (an
@@ -50,16 +58,17 @@ from inflarm_planning.collision import (
 )
 from inflarm_planning.free_space import MAX_CELLS, FreeSpace, check_resolution, free_space
 from inflarm_planning.grid_search import (
-    MOVES,
-    STEP_LENGTH,
-    STEP_MANHATTAN,
+    STEP_COSTS,
     GridPath,
     astar_grid,
+    check_connectivity,
+    grid_distance,
+    kind_costs,
 )
 
 __all__ = ['COSTS', 'Cuboid', 'NoPathError', 'PlanResult', 'plan', 'plan_path']
 
-COSTS = {'length': STEP_LENGTH, 'paper': STEP_MANHATTAN}
+COSTS = STEP_COSTS
 """Step costs [cells] of the two costs: path length (default), Manhattan length (eq. (7))."""
 
 INITIAL_BOUND = 1.5
@@ -100,6 +109,8 @@ class PlanResult:
         Grid indices of the grid points of the path.
     cost : str
         The cost used, a key of `COSTS`.
+    connectivity : int
+        The neighbourhood searched: 6, 18 or 26.
     expanded : int
         Cells expanded by the search (all crops together).
     searches : int
@@ -113,6 +124,7 @@ class PlanResult:
     path: npt.NDArray[np.float64]
     cells: npt.NDArray[np.int64]
     cost: str
+    connectivity: int
     expanded: int
     searches: int
     search_time_s: float
@@ -180,17 +192,10 @@ def _grid_cell(space: FreeSpace, point: np.ndarray, name: str, reason: str) -> n
     return corners[np.argmin(distance)]
 
 
-_KIND = np.abs(MOVES).sum(axis=1)  # 1: along an axis, 2: in a plane, 3: across a cube
-FREE_COSTS = {name: tuple(float(cost[np.argmax(np.equal(_KIND, kind))]) for kind in (1, 2, 3))
-              for name, cost in COSTS.items()}
-"""Cost of a step along an axis, in a plane and across a cube [cells], per cost."""
-
-
-def _free_cost(delta: np.ndarray, cost: str) -> float:
+def _free_cost(delta: np.ndarray, cost: str, connectivity: int) -> float:
     """Cost of the cheapest obstacle-free grid path over ``delta`` cells."""
-    a, b, c = sorted((abs(int(v)) for v in delta), reverse=True)
-    one, two, three = FREE_COSTS[cost]
-    return c * three + (b - c) * two + (a - b) * one
+    one, two, three = kind_costs(COSTS[cost])
+    return float(grid_distance(*(int(v) for v in delta), connectivity, one, two, three))
 
 
 def _ellipsoid_box(start: np.ndarray, goal: np.ndarray, bound: float, shape: np.ndarray
@@ -210,11 +215,11 @@ def _ellipsoid_box(start: np.ndarray, goal: np.ndarray, bound: float, shape: np.
     return np.array(low), np.array(high)
 
 
-def _search(space: FreeSpace, start: np.ndarray, goal: np.ndarray, cost: str
+def _search(space: FreeSpace, start: np.ndarray, goal: np.ndarray, cost: str, connectivity: int
             ) -> tuple[GridPath, int]:
     shape = np.array(space.lattice.shape)
     step_cost = COSTS[cost]
-    bound = INITIAL_BOUND * _free_cost(goal - start, cost)
+    bound = INITIAL_BOUND * _free_cost(goal - start, cost, connectivity)
     expanded, searches = 0, 0
     while True:
         low, high = _ellipsoid_box(start, goal, bound, shape)
@@ -222,7 +227,7 @@ def _search(space: FreeSpace, start: np.ndarray, goal: np.ndarray, cost: str
         crop = np.zeros(tuple(high - low + 3), dtype=np.uint8)
         crop[1:-1, 1:-1, 1:-1] = space.padded[low[0] + 1:high[0] + 2, low[1] + 1:high[1] + 2,
                                               low[2] + 1:high[2] + 2]
-        result = astar_grid(crop, start - low, goal - low, step_cost)
+        result = astar_grid(crop, start - low, goal - low, step_cost, connectivity)
         expanded += result.expanded
         searches += 1
         if result.found and (result.cost <= bound or whole):
@@ -241,6 +246,7 @@ def plan(
     alert_margin: float = 0.01,
     *,
     cost: str = 'length',
+    connectivity: int = 26,
     workspace: Workspace = WORKSPACE_POSITIVE,
     max_cells: int = MAX_CELLS,
 ) -> PlanResult:
@@ -265,6 +271,7 @@ def plan(
         raise ValueError(f'expected start != goal, both are {start.tolist()}')
     if cost not in COSTS:
         raise ValueError(f'expected cost in {sorted(COSTS)}, got {cost!r}')
+    connectivity = check_connectivity(connectivity)
     cuboids = as_cuboids(obstacles)
     margin = check_margin(alert_margin)
     resolution = check_resolution(resolution)
@@ -282,7 +289,7 @@ def plan(
         grid = GridPath(first[None, :], 0.0, 0)
         searches = 0
     else:
-        grid, searches = _search(space, first, last, cost)
+        grid, searches = _search(space, first, last, cost, connectivity)
     if not grid.found:
         raise NoPathError(
             f'no connection from start {np.round(start, 4).tolist()} m to goal '
@@ -295,7 +302,7 @@ def plan(
     if len(head) and np.linalg.norm(head[-1] - goal) < same:
         head = head[:-1]
     path = np.vstack([start, head, goal])
-    return PlanResult(path, grid.cells, cost, grid.expanded, searches,
+    return PlanResult(path, grid.cells, cost, connectivity, grid.expanded, searches,
                       time.perf_counter() - started, space)
 
 
@@ -307,10 +314,11 @@ def plan_path(
     alert_margin: float = 0.01,
     *,
     cost: str = 'length',
+    connectivity: int = 26,
     workspace: Workspace = WORKSPACE_POSITIVE,
     max_cells: int = MAX_CELLS,
 ) -> npt.NDArray[np.float64]:
-    """Plan a collision-free path of the soft arm's end by 26-connected A* (section 4.1).
+    """Plan a collision-free path of the soft arm's end by A* on the grid (section 4.1).
 
     Parameters
     ----------
@@ -324,7 +332,11 @@ def plan_path(
         Growth of each obstacle per axis [m], >= 0 (the paper: more than half the actuator
         width). The end stays out of the grown boxes and the PEA axes do not cross them.
     cost : {'length', 'paper'}
-        Path length + Euclidean heuristic (default), or eq. (7) (see the module docstring).
+        Path length (default), or eq. (7) (see the module docstring).
+    connectivity : {6, 18, 26}
+        Neighbours of a grid point: across the faces (6), faces and edges (18), or the whole
+        3 x 3 x 3 cube (26, the default: the paper's eight neighbours of a planar grid in 3-D,
+        and the shortest paths).
     workspace : Workspace
         Bounds of the grid (default: the positive-pressure work space, section 2.2).
     max_cells : int
@@ -339,12 +351,12 @@ def plan_path(
     Raises
     ------
     ValueError
-        Non-finite or misshapen start or goal, start == goal, an unknown cost, a bad
-        obstacle, a negative margin, a resolution <= 0, too fine for ``max_cells`` or coarser
-        than an alert region.
+        Non-finite or misshapen start or goal, start == goal, an unknown cost, a
+        connectivity other than 6, 18 or 26, a bad obstacle, a negative margin, a
+        resolution <= 0, too fine for ``max_cells`` or coarser than an alert region.
     NoPathError
         Start or goal outside the work space, inside an alert region, with an axis across
         one, or with no free grid point in reach; or no connection (the open set emptied).
     """
     return plan(start, goal, obstacles, resolution, alert_margin, cost=cost,
-                workspace=workspace, max_cells=max_cells).path
+                connectivity=connectivity, workspace=workspace, max_cells=max_cells).path

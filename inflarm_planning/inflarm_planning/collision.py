@@ -6,7 +6,8 @@ space of PEA1 or PEA2 meets it. As in the paper, the actuators are reduced to th
 from there to the end, ``l1`` from eq. (6)) and their cross-section is accounted for by growing
 each obstacle per axis by ``alert_margin`` (the *alert region*, larger than half the actuator
 width). Every test here is on the grown boxes; the obstacles themselves only matter for the
-distances of Fig 12 and for the repulsive term of section 4.3.2.
+distances of Fig 12 and for the repulsive term of section 4.3.2
+(`inflarm_model.alert_regions`, shared with the path follower).
 
 All functions broadcast over leading dimensions of the points and work in ``sra_mount`` [m].
 Boxes are passed as arrays of shape ``(K, 2, 3)`` (``boxes[k, 0]`` the min corner, ``boxes[k,
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from inflarm_model import alert_regions
 from inflarm_model.soft_arm import pea_length_from_end_point
 import inflarm_msgs_json
 
@@ -163,10 +165,7 @@ def box_array(obstacles: Iterable, margin: float = 0.0) -> npt.NDArray[np.float6
     """
     margin = check_margin(margin, 'margin')
     boxes = [c.bounds for c in as_cuboids(obstacles)]
-    array = np.array(boxes, dtype=float).reshape(-1, 2, 3)
-    array[:, 0] -= margin
-    array[:, 1] += margin
-    return array
+    return alert_regions.grow_boxes(np.array(boxes, dtype=float).reshape(-1, 2, 3), margin)
 
 
 def _check_boxes(boxes: npt.ArrayLike) -> npt.NDArray[np.float64]:
@@ -463,13 +462,14 @@ def distance_to_boxes(points: npt.ArrayLike, boxes: npt.ArrayLike) -> npt.NDArra
 def repulsive_offset(
     end_point: npt.ArrayLike, obstacles: Iterable, alert_margin: float
 ) -> npt.NDArray[np.float64]:
-    """Repulsive term of section 4.3.2: the displacement that takes the end out of alert regions.
+    """Repulsive term of section 4.3.2 for obstacles given as cuboids: the displacement that
+    takes the end out of their alert regions.
 
-    For each obstacle whose alert region (grown per axis by ``alert_margin``) contains the end,
-    the offset is the shortest way out: along the outward normal of the alert region's nearest
-    face, with magnitude the end's depth below that face (the distance from the end to the grown
-    box's surface). Offsets of several regions add up; outside every region the offset is 0.
-    The controller scales it by a gain and adds it to its target.
+    `inflarm_model.alert_regions.repulsive_offset` (the one implementation, which the path
+    follower of ``inflarm_control`` applies) on the obstacles grown by ``alert_margin``: for
+    each alert region containing the end, the shortest way out, along the outward normal of its
+    nearest face, with magnitude the end's depth below that face; offsets of several regions
+    add up; 0 outside every region.
 
     Parameters
     ----------
@@ -485,16 +485,4 @@ def repulsive_offset(
         Displacement [m]; its norm is the depth into the alert region (summed over regions).
     """
     p = _check_points(end_point, 'end_point')
-    boxes = box_array(obstacles, alert_margin)
-    offset = np.zeros(p.shape)
-    for low, high in boxes:
-        below, above = p - low, high - p  # depth under the low and high face of each axis
-        inside = np.all((below >= 0.0) & (above >= 0.0), axis=-1)
-        depths = np.concatenate([below, above], axis=-1)  # (..., 6): -x, -y, -z, +x, +y, +z
-        face = np.argmin(depths, axis=-1)
-        depth = np.take_along_axis(depths, face[..., None], axis=-1)[..., 0]
-        normal = np.zeros(p.shape)
-        np.put_along_axis(normal, (face % 3)[..., None],
-                          np.where(face < 3, -1.0, 1.0)[..., None], axis=-1)
-        offset += np.where(inside[..., None], normal * depth[..., None], 0.0)
-    return offset
+    return alert_regions.repulsive_offset(p, box_array(obstacles, alert_margin))

@@ -363,6 +363,7 @@ def plan_trajectory(
     alert_margin: float = 0.01,
     *,
     cost: str = 'length',
+    connectivity: int = 26,
     workspace: Workspace = WORKSPACE_POSITIVE,
     max_cells: int = MAX_CELLS,
     max_step: float = 0.005,
@@ -386,7 +387,7 @@ def plan_trajectory(
         _positive(value, name)
     smooth(np.zeros((2, 3)), np.zeros((0, 2, 3)), smoothing)  # validates smoothing
     grid = plan(start, goal, obstacles, resolution, alert_margin, cost=cost,
-                workspace=workspace, max_cells=max_cells)
+                connectivity=connectivity, workspace=workspace, max_cells=max_cells)
     space = grid.free_space
     trajectory = make_trajectory(grid.path, space.obstacles, space.alert_margin,
                                  max_step=max_step, max_speed=max_speed, max_accel=max_accel,

@@ -22,7 +22,9 @@ from inflarm_control.pid_ilc import (
     axis_outputs,
 )
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+from inflarm_model.alert_regions import grow_boxes
 from inflarm_model.soft_arm import CHAMBERS
+from inflarm_planning.collision import box_array
 from inflarm_planning.scenario import ALERT_MARGIN, GOAL, OBSTACLE, START
 from inflarm_planning.trajectory import plan_trajectory
 
@@ -100,6 +102,39 @@ def test_params_are_validated():
         PathFollowingParams(bellows_preload=-1.0)
     with pytest.raises(ValueError, match='feedforward_dead_zone >= 0'):
         PathFollowingParams(feedforward_dead_zone=-1.0)
+    with pytest.raises(ValueError, match='repulsion_gain >= 0'):
+        PathFollowingParams(repulsion_gain=-0.5)
+    with pytest.raises(ValueError, match=r'regions of shape \(K, 2, 3\)'):
+        PathFollower().set_alert_regions(np.zeros((2, 3)))
+    with pytest.raises(ValueError, match='min corner <= max corner'):
+        PathFollower().set_alert_regions([[[0.1, 0.0, 0.7], [0.0, 0.1, 0.8]]])
+
+
+def test_inside_an_alert_region_the_target_is_pulled_to_its_border():
+    # the reference sits 6 mm inside the region's -x face, the end 4 mm inside: the target is
+    # (r + k q) / (1 + k) with q the nearest border point, so with k = 1 the end is pushed out
+    # along -x and the PI's error to the path along y is halved
+    region = np.array([[[0.05, 0.0, 0.6], [0.2, 0.2, 0.8]]])
+    reference = np.array([0.056, 0.1, 0.7])
+    end = np.array([0.054, 0.098, 0.7])
+    outputs = {}
+    for gain in (0.0, 1.0):
+        follower = PathFollower(PathFollowingParams(repulsion_gain=gain, ki=(0.0,) * 3))
+        follower.set_alert_regions(region)
+        follower.start([reference], end, antagonistic_pressures([0.0, 0.0, 20e3], 6e3))
+        command = follower.step(end, DT)
+        outputs[gain] = axis_outputs(command)
+        np.testing.assert_allclose(follower.repulsion, [-0.004, 0.0, 0.0], atol=1e-12)
+    kp = np.array(PathFollowingParams().kp)
+    # the change of the P term is kp (e_repelled - e): e = (0.002, 0.002, 0) without, and
+    # ((0.002 - 0.004) / 2, 0.002 / 2, 0) with the repulsion
+    np.testing.assert_allclose(outputs[1.0] - outputs[0.0],
+                               kp * np.array([-0.003, -0.001, 0.0]), atol=1e-6)
+    follower = PathFollower()
+    follower.start([reference], np.array([0.04, 0.1, 0.7]), np.zeros(5))
+    follower.set_alert_regions(region)
+    follower.step(np.array([0.04, 0.1, 0.7]), DT)  # outside: no repulsion
+    np.testing.assert_array_equal(follower.repulsion, 0.0)
 
 
 def test_the_feedforward_loses_the_dead_zone_on_x_and_y_only():
@@ -212,6 +247,9 @@ def follow_scenario(path, feedforward, seed):
         plant.step(pending.pop(0), DT)
 
     follower = PathFollower(params)
+    # the alert region of the demo's ObstacleSet: the path wraps it (31 mm from the obstacle),
+    # so the measured end's noise brings it in now and then, without a disturbance that counts
+    follower.set_alert_regions(grow_boxes(box_array([OBSTACLE]), ALERT_MARGIN))
     follower.start([START], plant.measure()[0], plant.chamber_pressures[0],
                    None if feedforward is None else feedforward[:1])
     for _ in range(100):
@@ -233,7 +271,8 @@ def test_the_scenario_path_is_followed_within_5_mm(knowledge, scenario_path, see
     truth, duration = follow_scenario(scenario_path, feedforward, seed)
     error = project_on_polyline(truth, scenario_path)[0]
     assert np.linalg.norm(truth[-1] - scenario_path[-1]) < 0.002, truth[-1]
-    # 2.6-2.9 mm here; the demo adds the camera's error to this, under the paper's 5 mm
+    # 3.0-3.1 mm here (2.6-2.9 mm without the repulsion); the demo adds the camera's error to
+    # this, under the paper's 5 mm
     assert error.max() < 0.0035, (error.max(), truth[np.argmax(error)])
     assert np.sqrt(np.mean(error**2)) < 0.002
     assert duration < 110.0  # the planner's 50 s at 5 mm/s, slowed where the arm lags

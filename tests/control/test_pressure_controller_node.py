@@ -239,3 +239,29 @@ def test_an_absurd_ball_position_reaches_neither_the_report_nor_the_memory(execu
     with np.load(memory_file) as data:
         assert np.isfinite(data['memories']).all()
         assert data['memories'].max() <= 100e3
+
+
+def test_obstacles_set_the_alert_regions_the_follower_repels_from(executor):
+    from inflarm_msgs_json import Cuboid, ObstacleSet
+    from inflarm_msgs_json.ros.qos import LATCHED_QOS
+
+    rig = Rig(executor)
+    node = rig.controller
+    assert node.get_parameter('path.repulsion_gain').value == 1.0
+    assert node.follower.params.repulsion_gain == 1.0
+    assert not node.set_parameters([Parameter('path.repulsion_gain', value=2.0)])[0].successful
+    obstacles_pub = rig.probe.create_publisher(String, 'obstacles', LATCHED_QOS)
+    box = Cuboid(min=(0.035, 0.04, 0.65), max=(0.14, 0.14, 0.78), name='box')
+    obstacles_pub.publish(to_string_msg(ObstacleSet('world', 0.03, (box,))))  # wrong frame
+    rig.spin(0.3)
+    assert node.follower.alert_regions.shape == (0, 2, 3)
+    obstacles_pub.publish(to_string_msg(ObstacleSet('sra_mount', 0.03, (box,))))
+    assert spin_until(executor, lambda: len(node.follower.alert_regions) == 1)
+    np.testing.assert_allclose(node.follower.alert_regions[0],
+                               [[0.005, 0.01, 0.62], [0.17, 0.17, 0.81]], atol=1e-12)
+
+
+def test_a_repulsion_gain_out_of_range_stops_the_node_at_startup(ros_context):
+    with pytest.raises(Exception, match='path.repulsion_gain'):
+        PressureController(context=ros_context,
+                           parameter_overrides=[Parameter('path.repulsion_gain', value=-1.0)])

@@ -2,10 +2,15 @@
 
 The arm is drawn from eq. (6) of 001_... as the paper states it, ``(z - l1)^2 + x^2 + y^2 =
 l1^2``, solved here again: PEA1 from the mount (0, 0, 0) to (0, 0, l1), PEA2 from there to the
-end. Nothing of ``inflarm_planning`` is used.
+end. Shortest grid paths come from scipy's Dijkstra over a graph built here from a free grid and
+a neighbourhood. Nothing of ``inflarm_planning`` is used.
 """
 
+import itertools
+
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
 
 TOLERANCE = 1e-9
 """[m] A point on a box's surface is outside it: the alert region's border belongs to the free
@@ -84,3 +89,40 @@ def axes_clear_of_alert_regions(points, obstacles, margin, samples=2000, clearan
         a_low, a_high = grow(low, high, margin + clearance)
         clear &= ~strictly_inside(pts, a_low, a_high).any(axis=1)
     return clear
+
+
+def neighbourhood(connectivity):
+    """The steps to a cell's neighbours, (connectivity, 3): across faces (6), faces and edges
+    (18), or the whole 3 x 3 x 3 cube (26)."""
+    changed = {6: 1, 18: 2, 26: 3}[connectivity]  # coordinates a step may change
+    return np.array([m for m in itertools.product((-1, 0, 1), repeat=3)
+                     if 0 < np.count_nonzero(m) <= changed])
+
+
+def grid_graph(free, connectivity, cost='length'):
+    """The free grid as a sparse graph: an edge for each step of the neighbourhood between free
+    cells that cuts no corner (every cell of the unit cell it crosses is free), weighted by the
+    step's length (``'length'``) or its Manhattan length (``'manhattan'``)."""
+    shape = np.array(free.shape)
+    cells = np.argwhere(free)
+    rows, cols, weights = [], [], []
+    for move in neighbourhood(connectivity):
+        ok = np.ones(len(cells), dtype=bool)
+        for mask in itertools.product((0, 1), repeat=3):
+            corner = cells + move * np.array(mask)
+            inside = np.all((corner >= 0) & (corner < shape), axis=1)
+            ok &= inside
+            ok[inside] &= free[tuple(corner[inside].T)]
+        rows.append(np.ravel_multi_index(cells[ok].T, free.shape))
+        cols.append(np.ravel_multi_index((cells[ok] + move).T, free.shape))
+        weight = np.linalg.norm(move) if cost == 'length' else float(np.abs(move).sum())
+        weights.append(np.full(ok.sum(), weight))
+    return coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(free.size, free.size)).tocsr()
+
+
+def shortest_costs(free, first, connectivity, cost='length'):
+    """Dijkstra's cost [cells] from cell ``first`` to every cell, shaped as ``free``."""
+    graph = grid_graph(free, connectivity, cost)
+    distance = dijkstra(graph, indices=np.ravel_multi_index(tuple(first), free.shape))
+    return distance.reshape(free.shape)

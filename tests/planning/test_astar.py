@@ -1,18 +1,21 @@
 """A* planning: the paper's scenario, seeded random scenarios, optimality, errors."""
 
-import itertools
-
 import numpy as np
 import pytest
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from inflarm_model.soft_arm import WORKSPACE_POSITIVE
 import inflarm_msgs_json
 from inflarm_planning.astar import Cuboid, NoPathError, plan, plan_path
 from inflarm_planning.free_space import free_space
+from inflarm_planning.grid_search import STEP_COSTS, grid_distance, kind_costs
 from inflarm_planning.scenario import ALERT_MARGIN, GOAL, OBSTACLE, START
-from planning_reference import axes_clear_of_alert_regions, strictly_inside, violations
+from planning_reference import (
+    axes_clear_of_alert_regions,
+    neighbourhood,
+    shortest_costs,
+    strictly_inside,
+    violations,
+)
 
 PAPER = [OBSTACLE.bounds]
 
@@ -60,36 +63,79 @@ def test_the_papers_scenario_with_the_cost_of_eq_7():
     assert manhattan <= np.abs(np.diff(default.path, axis=0)).sum() + 1e-12
 
 
-def test_the_path_is_a_shortest_grid_path():
-    """Same cost as Dijkstra (scipy) over the grid graph built here from the free points."""
+@pytest.mark.parametrize('connectivity', [6, 18, 26])
+@pytest.mark.parametrize('cost', ['length', 'paper'])
+def test_the_path_is_a_shortest_grid_path(connectivity, cost):
+    """Same cost as Dijkstra (scipy) over the grid graph built independently from the free
+    points, for each neighbourhood and cost."""
     resolution, margin = 0.01, 0.01
-    result = plan(START, GOAL, [OBSTACLE], resolution, margin)
+    result = plan(START, GOAL, [OBSTACLE], resolution, margin, cost=cost,
+                  connectivity=connectivity)
+    assert result.connectivity == connectivity
     free = free_space([OBSTACLE], resolution, margin).free
-    shape = np.array(free.shape)
-    rows, cols, weights = [], [], []
-    cells = np.argwhere(free)
-    for move in itertools.product((-1, 0, 1), repeat=3):
-        move = np.array(move)
-        if not move.any():
-            continue
-        ok = np.ones(len(cells), dtype=bool)
-        # no corner cutting: every corner of the unit cell the step crosses must be free
-        for mask in itertools.product((0, 1), repeat=3):
-            corner = cells + move * np.array(mask)
-            inside = np.all((corner >= 0) & (corner < shape), axis=1)
-            ok &= inside
-            ok[inside] &= free[tuple(corner[inside].T)]
-        rows.append(np.ravel_multi_index(cells[ok].T, free.shape))
-        cols.append(np.ravel_multi_index((cells[ok] + move).T, free.shape))
-        weights.append(np.full(ok.sum(), np.linalg.norm(move)))
-    graph = coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
-                       shape=(free.size, free.size)).tocsr()
     first, last = result.cells[0], result.cells[-1]
-    distance = dijkstra(graph, indices=np.ravel_multi_index(first, free.shape))
-    optimum = distance[np.ravel_multi_index(last, free.shape)] * resolution
-    grid_length = length(result.free_space.lattice.points(result.cells))
-    assert grid_length == pytest.approx(optimum, rel=1e-6)
+    reference = 'length' if cost == 'length' else 'manhattan'
+    optimum = shortest_costs(free, first, connectivity, reference)[tuple(last)]
+    steps = np.diff(result.cells, axis=0)
+    found = (np.linalg.norm(steps, axis=1) if cost == 'length' else np.abs(steps).sum(axis=1))
+    assert found.sum() == pytest.approx(optimum, rel=1e-6)
     assert result.searches >= 1 and result.expanded > 0
+
+
+@pytest.mark.parametrize('connectivity', [6, 18, 26])
+def test_each_connectivity_plans_the_papers_scenario_with_its_own_steps(connectivity):
+    result = plan(START, GOAL, [OBSTACLE], 0.005, ALERT_MARGIN, connectivity=connectivity)
+    check_path(result.path, START, GOAL, PAPER, ALERT_MARGIN)
+    allowed = {tuple(m) for m in neighbourhood(connectivity)}
+    steps = {tuple(m) for m in np.diff(result.cells, axis=0)}
+    assert steps <= allowed, steps - allowed
+    if connectivity > 6:  # the larger neighbourhood's own steps are used
+        smaller = {tuple(m) for m in neighbourhood(6 if connectivity == 18 else 18)}
+        assert steps - smaller
+
+
+def test_the_path_shortens_as_the_neighbourhood_grows():
+    # the figures of inflarm_planning/README.md (grid path lengths, 5 mm, margin 30 mm)
+    lengths = {c: plan(START, GOAL, [OBSTACLE], 0.005, ALERT_MARGIN, connectivity=c).length
+               for c in (6, 18, 26)}
+    assert lengths[6] >= lengths[18] >= lengths[26]
+    np.testing.assert_allclose([lengths[c] * 1e3 for c in (6, 18, 26)],
+                               [280.0, 259.50, 258.05], atol=0.01)
+
+
+def test_the_larger_neighbourhoods_come_closer_to_the_straight_line():
+    # the worst ratio of the obstacle-free grid length to the straight line, over directions
+    # (inflarm_planning/README.md: 1.73 / 1.39 / 1.13 for 6 / 18 / 26 neighbours)
+    one, two, three = kind_costs(STEP_COSTS['length'])
+    deltas = np.argwhere(np.ones((25, 25, 25), dtype=bool))[1:]
+    worst = {c: max(grid_distance(*(int(v) for v in d), c, one, two, three) / np.linalg.norm(d)
+                    for d in deltas) for c in (6, 18, 26)}
+    assert worst[6] == pytest.approx(np.sqrt(3.0))
+    assert worst[18] == pytest.approx((1.0 + np.sqrt(2.0)) / np.sqrt(3.0))
+    assert 1.12 < worst[26] < 1.13
+
+
+@pytest.mark.parametrize('connectivity', [6, 18, 26])
+@pytest.mark.parametrize('cost', ['length', 'paper'])
+def test_the_heuristic_is_the_obstacle_free_distance_so_admissible_and_consistent(
+        connectivity, cost):
+    """``grid_distance`` equals Dijkstra's distance on an empty grid (so it never overestimates
+    a path among obstacles), and no step lowers ``cost + h`` (consistency)."""
+    n = 7
+    centre = np.array([n // 2] * 3)
+    reference = 'length' if cost == 'length' else 'manhattan'
+    exact = shortest_costs(np.ones((n, n, n), dtype=bool), centre, connectivity, reference)
+    one, two, three = kind_costs(STEP_COSTS[cost])
+    cells = np.argwhere(np.ones((n, n, n), dtype=bool))
+    h = np.array([grid_distance(*(int(v) for v in c - centre), connectivity, one, two, three)
+                  for c in cells])
+    np.testing.assert_allclose(h, exact[tuple(cells.T)], atol=1e-12)
+    for move in neighbourhood(connectivity):
+        step = np.linalg.norm(move) if cost == 'length' else float(np.abs(move).sum())
+        for c in cells[::7]:
+            a = grid_distance(*(int(v) for v in c), connectivity, one, two, three)
+            b = grid_distance(*(int(v) for v in c + move), connectivity, one, two, three)
+            assert a <= step + b + 1e-12
 
 
 # --- random scenarios --------------------------------------------------------------------------
@@ -213,6 +259,9 @@ def test_a_start_whose_grid_neighbours_are_all_blocked_is_refused():
     ({'resolution': 0.15}, 'coarser than the alert region'),
     ({'alert_margin': -0.01}, 'alert_margin >= 0'),
     ({'cost': 'manhattan'}, "cost in \\['length', 'paper'\\]"),
+    ({'connectivity': 8}, r"connectivity in \(6, 18, 26\), got 8 .*the paper's eight"),
+    ({'connectivity': 26.0}, r'connectivity in \(6, 18, 26\)'),
+    ({'connectivity': True}, r'connectivity in \(6, 18, 26\)'),
     ({'obstacles': [(0, 0, 0)]}, r'obstacles\[0\] to be a Cuboid'),
 ])
 def test_bad_arguments_raise_value_errors_naming_them(kwargs, match):

@@ -102,6 +102,29 @@ def test_defaults_and_parameter_checks(executor):
     assert node.params['cost'] == 'paper'
     assert not node.set_parameters([Parameter('frame_id', value='world')])[0].successful
     assert not node.set_parameters([Parameter('service.resolution_m', value=0.0)])[0].successful
+    assert node.get_parameter('connectivity').value == 26
+    refused = node.set_parameters([Parameter('connectivity', value=8)])[0]
+    assert not refused.successful
+    assert 'expected connectivity in (6, 18, 26)' in refused.reason, refused.reason
+    assert not node.set_parameters([Parameter('connectivity', value=27)])[0].successful
+    assert node.params['connectivity'] == 26
+
+
+def test_a_connectivity_out_of_the_three_is_refused_at_start(executor):
+    with pytest.raises(ValueError, match=r'connectivity in \(6, 18, 26\), got 8'):
+        PathPlanner(context=executor.context,
+                    parameter_overrides=[Parameter('connectivity', value=8)])
+
+
+def test_the_connectivity_set_at_runtime_is_planned_with(executor):
+    rig = Rig(executor)
+    assert rig.planner.set_parameters([Parameter('connectivity', value=6)])[0].successful
+    rig.obstacles()
+    assert spin_until(executor, lambda: len(rig.planner.model.obstacles) == 1)
+    rig.request(resolution=0.005)
+    outcome = rig.wait_outcomes(1)
+    assert outcome.status == 'planned', outcome.message
+    assert 'grid path 280.0 mm at 5 mm' in outcome.message  # 6-connected (26: 258.1 mm)
 
 
 def test_a_plan_request_publishes_the_path_markers_and_outcome(executor):

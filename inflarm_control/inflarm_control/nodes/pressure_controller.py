@@ -16,7 +16,10 @@ PI alone without a database or where it has no knowledge), and a PI per axis (``
 ``path.ki``) from the pressures held when the path arrives (no jump). After its end the path's
 last waypoint is held, under control, until the next task, path, ``~/stop`` or ``~/vent``.
 While following, every bellows pair is driven antagonistically around ``path.bellows_preload_pa``
-(``pid_ilc`` module docstring): no bellows exhausts as the end crosses an axis.
+(``pid_ilc`` module docstring): no bellows exhausts as the end crosses an axis. While the
+measured end is inside an alert region of the latest ``obstacles`` (each box grown by the set's
+``alert_margin``), the follower pulls its target towards the region's border with
+``path.repulsion_gain`` (section 4.3.2; `PathFollower` module docstring).
 
 Subscribes:
     ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m]; a point
@@ -26,6 +29,9 @@ Subscribes:
     planned_path (nav_msgs/Path, LATCHED_QOS): follow this path (at most ``max_waypoints``
         waypoints, each in the work space; pose stamps are not used: the arm sets the pace),
         then hold its last waypoint.
+    obstacles (std_msgs/String: ObstacleSet JSON, LATCHED_QOS): boxes in ``frame_id`` and their
+        alert margin; the alert regions the path follower repels the end from (the latest set
+        replaces the previous one; a rejected one leaves it in force).
 Publishes:
     chamber_pressure_command (std_msgs/String: PressureCommand JSON, COMMAND_QOS) [Pa].
     trial_report (std_msgs/String: TrialReport JSON, RELIABLE_QOS): per-axis RMSE, reach time
@@ -40,7 +46,7 @@ Parameters:
     rate_hz, gains.kp/ki/kd, limits.p_set_pa, limits.p_max_pa, learning.*, quadrant_bellows,
         path.bellows_preload_pa (read-only),
     path.kp, path.ki (read-only), path.speed_mps, path.slow_error_m, path.stop_error_m,
-        path.feedforward_lead_s, path.feedforward_dead_zone_pa (read-only),
+        path.feedforward_lead_s, path.feedforward_dead_zone_pa, path.repulsion_gain (read-only),
     trial_duration_s, measurement_timeout_s, reach_tolerance_m,
     workspace_margin_m, max_waypoints, ilc_memory_path, knowledge_db_path (read-only),
     frame_id (read-only).
@@ -62,8 +68,9 @@ from inflarm_control.knowledge import KnowledgeDatabase, holding_pressure, seed_
 from inflarm_control.path_following import PathFollower, PathFollowingParams
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams
 from inflarm_control.trial_metrics import TrialMetrics
+from inflarm_model.alert_regions import regions_of
 from inflarm_model.soft_arm import CHAMBERS, Workspace, check_in_workspace
-from inflarm_msgs_json import ControlTask, PressureCommand, TrialReport
+from inflarm_msgs_json import ControlTask, ObstacleSet, PressureCommand, TrialReport
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
@@ -127,6 +134,10 @@ PARAMETERS = (
               "the knowledge's x and y holding outputs shrink by this much: the valves' dead "
               'zone, which the preloaded bellows never enter [Pa]',
               range=(0.0, 50e3), read_only=True),
+    Parameter('path.repulsion_gain', _PATH_DEFAULTS.repulsion_gain,
+              'path following: while the end is in an alert region of the obstacles, the target '
+              'is (reference + k nearest border point) / (1 + k) (section 4.3.2); 0: no '
+              'repulsion', range=(0.0, 10.0), read_only=True),
     Parameter('trial_duration_s', 20.0, 'length of a trial [s]', range=(1.0, 600.0)),
     Parameter('measurement_timeout_s', 0.5,
               'a ball position older than this is a vision dropout: hold, do not learn [s]',
@@ -153,7 +164,8 @@ def path_following_params(p: dict, core: PidIlcParams) -> PathFollowingParams:
         bellows_preload=p['path.bellows_preload_pa'], p_max=core.p_max, speed=p['path.speed_mps'],
         slow_error=p['path.slow_error_m'], stop_error=p['path.stop_error_m'],
         feedforward_lead=p['path.feedforward_lead_s'],
-        feedforward_dead_zone=p['path.feedforward_dead_zone_pa'], workspace=core.workspace)
+        feedforward_dead_zone=p['path.feedforward_dead_zone_pa'],
+        repulsion_gain=p['path.repulsion_gain'], workspace=core.workspace)
 
 
 def task_key(target: np.ndarray) -> tuple[int, int, int]:
@@ -205,6 +217,7 @@ class PressureController(GuardedCallbacks, Node):
         self.create_guarded_subscription(
             String, 'control_task', self.on_control_task, RELIABLE_QOS)
         self.create_guarded_subscription(Path, 'planned_path', self.on_planned_path, LATCHED_QOS)
+        self.create_guarded_subscription(String, 'obstacles', self.on_obstacles, LATCHED_QOS)
         self.command_pub = self.create_publisher(
             String, 'chamber_pressure_command', COMMAND_QOS,
             event_callbacks=publisher_events(self, 'chamber_pressure_command'))
@@ -242,6 +255,15 @@ class PressureController(GuardedCallbacks, Node):
         self.check_frame(task.frame_id)
         self.following = False
         self.start_task(task)
+
+    def on_obstacles(self, msg: String) -> None:
+        obstacles = from_string_msg(msg, expected=ObstacleSet)
+        self.check_frame(obstacles.frame_id)
+        self.follower.set_alert_regions(regions_of(obstacles))
+        gain = self.params['path.repulsion_gain']
+        self.get_logger().info(
+            f'{len(obstacles.obstacles)} obstacles: repelling from their alert regions '
+            f'(margin {obstacles.alert_margin:.3f} m, gain {gain:g})', throttle_duration_sec=1.0)
 
     def on_planned_path(self, msg: Path) -> None:
         if not 1 <= len(msg.poses) <= self.params['max_waypoints']:

@@ -36,8 +36,8 @@ Services:
         none (the reason is on ``~/plan_outcome``, published before the answer, and in the log).
         ``tolerance`` is not used.
 Parameters:
-    frame_id (read-only), min_alert_margin_m, cost, service.resolution_m, service.max_cells,
-    trajectory.max_step_m, trajectory.max_speed_mps, trajectory.max_accel_mps2,
+    frame_id (read-only), min_alert_margin_m, cost, connectivity, service.resolution_m,
+    service.max_cells, trajectory.max_step_m, trajectory.max_speed_mps, trajectory.max_accel_mps2,
     trajectory.smoothing, trajectory.check_step_m, replan.position_timeout_s,
     max_cells (read-only).
 """
@@ -66,6 +66,7 @@ from inflarm_msgs_json.ros.spin import spin_node
 from inflarm_planning.astar import NoPathError
 from inflarm_planning.collision import CHECK_STEP
 from inflarm_planning.free_space import MAX_CELLS
+from inflarm_planning.grid_search import CONNECTIVITIES, check_connectivity
 from inflarm_planning.requests import (
     ObstacleModel,
     PlanQuery,
@@ -92,6 +93,10 @@ PARAMETERS = (
               range=(0.0, 0.2)),
     Parameter('cost', 'length', "A* cost: 'length' (path length + Euclidean) or 'paper' "
               '(eq. 7: Manhattan length + Euclidean)'),
+    Parameter('connectivity', 26,
+              f'A* neighbours of a grid point, one of {CONNECTIVITIES}: faces (6), faces and '
+              "edges (18), the 3x3x3 cube (26: the 3-D form of the paper's 8 neighbours, "
+              'the shortest paths); checked at runtime', range=(6, 26)),
     Parameter('service.resolution_m', 0.005, 'grid spacing of ~/plan requests [m]',
               range=(0.0005, 0.1)),
     Parameter('service.max_cells', 10_000_000,
@@ -143,6 +148,7 @@ class PathPlanner(GuardedCallbacks, Node):
         super().__init__('path_planner', **kwargs)
         self.params = declare_parameters(self, PARAMETERS)
         check_cost(self.params['cost'])
+        check_connectivity(self.params['connectivity'])
         self.frame_id = self.params['frame_id']
         self.model = ObstacleModel((), self.params['min_alert_margin_m'], 0.0)
         self.last_query: PlanQuery | None = None  # what a replan repeats
@@ -178,16 +184,18 @@ class PathPlanner(GuardedCallbacks, Node):
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: frame '{self.frame_id}', alert margin >= "
-            f"{self.params['min_alert_margin_m']:.3f} m, cost '{self.params['cost']}', service "
+            f"{self.params['min_alert_margin_m']:.3f} m, cost '{self.params['cost']}', "
+            f"{self.params['connectivity']}-connected, service "
             f"grids up to {self.params['service.max_cells']:.3g} points")
 
     # -- parameters ------------------------------------------------------------------------------
 
     def on_set_parameters(self, parameters) -> SetParametersResult:
+        checks = {'cost': check_cost, 'connectivity': check_connectivity}
         for parameter in parameters:
-            if parameter.name == 'cost':
+            if parameter.name in checks:
                 try:
-                    check_cost(parameter.value)
+                    checks[parameter.name](parameter.value)
                 except ValueError as err:
                     return SetParametersResult(successful=False, reason=str(err))
         return SetParametersResult(successful=True)
@@ -309,7 +317,8 @@ class PathPlanner(GuardedCallbacks, Node):
         try:
             planned = plan_trajectory(
                 q.start, q.goal, job.model.obstacles, q.resolution, job.model.alert_margin,
-                cost=p['cost'], max_step=p['trajectory.max_step_m'],
+                cost=p['cost'], connectivity=p['connectivity'],
+                max_step=p['trajectory.max_step_m'],
                 max_speed=p['trajectory.max_speed_mps'], max_accel=p['trajectory.max_accel_mps2'],
                 smoothing=p['trajectory.smoothing'], check_step=p['trajectory.check_step_m'],
                 max_cells=p['max_cells'])
