@@ -3,34 +3,32 @@
 The vision sensor of ``001_b59ad71c956a1751`` (3.1, 3.3, 4.3.2): an external camera records the
 small yellow ball on the soft arm's end. Pure numpy/OpenCV, no rclpy.
 
-Pipeline of `detect_ball` (one frame, whole image):
+Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gives the why):
 
-1. **Candidates** on a copy shrunk by ``s`` (`DetectorParams.decimation`: the smallest ball
-   keeps >= 2 px of radius): HSV thresholds (``cv2.inRange``), an opening that removes specks,
-   external contours with their holes (``cv2.findContours``, two-level hierarchy). A contour is
-   a candidate if its area fits the radius range, its circularity ``4 pi A / P^2`` and its
-   fill (area not in holes) are high enough, and it lies close to an ellipse that is not too
-   elongated (`_elliptic`).
-2. **Sub-pixel outline** (`_refine_at`), from the candidate's centroid and area: rays sample
-   the full-resolution image (bilinear, ``cv2.remap``) across the ball's edge, and on each ray
-   the edge is where the signal crosses half-way between the inside and outside levels
-   (`_edges`). The signal is a colour channel **blind to the ball's colour** (orthogonal in
-   BGR to the ball's colour, measured on its unclipped, unhighlighted pixels): in it the ball
-   reads 0 however it is shaded, and the edge is the background being covered, so limb
-   darkening and shadow do not move it. When the background is itself dark in that channel
-   (black, red, yellow surroundings) the **chroma** channel (orthogonal to grey) is used. The
-   edge points are moved out by the blur's shift of a curved edge, ``sigma^2 / (2 r)``.
-3. **Fit** (`_fit_outline`): an ellipse (``cv2.fitEllipseDirect``) through the edge points,
-   refitted without those farther from it than 3 robust standard deviations (at most
-   ``0.5 + 0.03 r`` px). ``confidence`` is the fraction of rays whose edge lies on the
-   ellipse; a candidate is accepted (`_accept`) if it is high enough, the ellipse not too
-   elongated and its radius in range. If the outline from the decimated candidate fails, its
-   blob is thresholded again at full resolution in a region around it (`refine_in_region`).
-   The accepted candidate of highest confidence wins.
+1. **Candidates** (`_candidates`) on a copy shrunk by ``s`` (`DetectorParams.decimation`):
+   HSV thresholds, holes of each blob filled (highlights), rings and blobs outside the radius
+   range dropped; a round blob gives its centroid and area radius, any other also the largest
+   disc inside it (distance transform: a ball touching its colour, or partly hidden); ranked by
+   shape times the square of the blob's mean saturation.
+2. **Outline** (`_refine`: `_refine_at` twice). A coarse pass from the candidate, its edges on
+   rays in the channel that best separates the ball's own samples from its surround (Fisher's
+   discriminant, levels measured), then a fine pass with rays from that outline's centre in
+   the best channel **blind to the ball's colour** (Fisher's discriminant in the plane of BGR
+   orthogonal to it: the ball reads 0 however it is shaded). On each ray the edge is where the
+   signal crosses half-way between the inside and outside levels (`_edges`); a ray counts only
+   if it is inside the ball just before its edge. The edge points are moved out by the blur's
+   shift of a curved edge, ``sigma^2 / (2 r)``.
+3. **Fit** (`_fit_outline`): a consensus circle through triples of edge points, least squares
+   through its points without the far ones, an ellipse when 85 % of the outline is on it.
+   ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
+   it is high enough, the outline not too elongated, its radius in range, and the rays off it
+   one hidden arc at most (`_one_hidden_arc`). The accepted candidate of highest confidence
+   wins.
 
-`BallTracker` refines the outline at the position predicted from the last detections with
-their colour and blur (tracking mode), then tries the thresholded blobs around it, and falls
-back to `detect_ball` on the whole frame when the ball is lost.
+`BallTracker` refines the fine outline at the position predicted from the last detections
+with their colour and blur (tracking mode), then searches the candidates around it (`_search`,
+the whole-frame search's code on a region), and falls back to `detect_ball` on the whole frame
+when the ball is lost.
 
 Pixel convention (OpenCV's): pixel ``i`` spans ``[i - 0.5, i + 0.5]``; ``center`` is the centre
 of the fitted ellipse, ``radius`` ``sqrt(a b)`` of its semi-axes (the radius of the disc of equal
@@ -81,17 +79,19 @@ class DetectorParams:
     min_radius_px, max_radius_px : float
         Range of apparent radii [px].
     min_circularity : float
-        Smallest ``4 pi A / P^2`` of a candidate's thresholded contour (1 for a disc, pi / 4
-        for a square, 0.75 for a half disc; a pixel contour scores less than its shape).
+        Smallest ``4 pi A / P^2`` of a blob whose centroid is a candidate (1 for a disc, pi / 4
+        for a square; a pixel contour scores less than its shape). Any blob's largest inscribed
+        disc is a candidate too.
     min_fill : float
-        Smallest fraction of a candidate's contour area that is not holes (rejects rings; a
-        highlight the thresholds miss is a small hole).
+        Smallest fraction of a blob's contour area that is not holes (rejects rings; a
+        highlight punches a hole of a few percent).
     max_aspect_ratio : float
         Largest ratio of the fitted ellipse's axes. The image of a sphere at angle ``t`` off the
         optical axis has a ratio of about ``1 / cos(t)``: 1.15 at 30 deg, 1.31 at 40 deg.
     min_confidence : float
-        Smallest fraction of the outline found on the fitted ellipse (a half disc scores about
-        0.7).
+        Smallest fraction of the outline found on the fitted outline (a ball 30 % hidden scores
+        about 0.65; a half disc, whose rays off the outline are one run of half of them, is
+        refused whatever it scores).
     min_chroma : float
         Smallest distance of the ball's colour from grey [grey levels] (rejects dark, nearly
         grey blobs whose hue is noise).
