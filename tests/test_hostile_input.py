@@ -33,6 +33,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, JointState
 from std_msgs.msg import String
 
+from inflarm_bringup.nodes.live_view import LiveView
 from inflarm_control.nodes.elastostatic_ik import ElastostaticIk
 from inflarm_control.nodes.pressure_controller import PressureController
 from inflarm_control.nodes.tip_path_demo import TipPathDemo
@@ -48,7 +49,7 @@ from inflarm_model.camera import PinholeCamera, RigidTransform
 from inflarm_model.elastostatics import motor_torques, spring_deflections
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS
-from inflarm_model.urdf import JOINT_LIMITS
+from inflarm_model.urdf import JOINT_LIMITS, flexible_arm_urdf
 from inflarm_msgs_json import (
     ChamberPressures,
     ControlTask,
@@ -322,6 +323,39 @@ NODES = {
                                         _published('ball_position'))}),
     # no subscriptions: its timers, services and parameters, with no camera to open
     'camera_driver': NodeCase(CameraDriverNode, {'device': '/nonexistent/camera.avi'}),
+    'live_view': NodeCase(LiveView, {'port': 0, 'controls_enabled': True}, valid={
+        'robot_description': (lambda n: String(data=flexible_arm_urdf()),
+                              lambda n, out: n.robot is not None),
+        'estimated_joint_states': (
+            lambda n: JointState(name=list(FlexibleArm.JOINT_NAMES), position=[0.1] * 7),
+            lambda n, out: n.joint_positions is not None),
+        'estimated_wrench': (lambda n: _wrench(n), lambda n, out: n.wrench is not None
+                             or n.joint_positions is None),
+        'estimated_tip': (lambda n: point(0.8, 0.1, 0.0, 'base_link'),
+                          lambda n, out: n.tip_estimate[0] == 0.8),
+        'link_status': (
+            lambda n: to_string_msg(LinkStatus.from_moments('link_1', 50e3, 20.0, 5.0)),
+            lambda n, out: 'link_1' in n.link_status),
+        'tip_trajectory': (lambda n: path([(0.8, 0.1, 0.0), (0.8, 0.2, 0.0)], 'base_link', n),
+                           lambda n, out: n.trajectory.shape == (2, 3)),
+        'tip_position_truth': (lambda n: point(0.7, 0.1, 0.0, 'base_link'),
+                               lambda n, out: n.tip_truth[0] == 0.7),
+        'ball_position': (lambda n: point(0.0, 0.0, 0.604, 'sra_mount'),
+                          lambda n, out: n.ball is not None and n.ball[2] == 0.604),
+        'end_point_truth': (lambda n: point(0.0, 0.0, 0.61, 'sra_mount'),
+                            lambda n, out: n.end_truth[2] == 0.61),
+        'planned_path': (lambda n: path([(0.0, 0.0, 0.61), (0.05, 0.0, 0.62)], 'sra_mount', n),
+                         lambda n, out: n.path.shape == (2, 3)),
+        'obstacles': (
+            lambda n: to_string_msg(ObstacleSet('sra_mount', 0.03, (OBSTACLE.to_message(),))),
+            lambda n, out: n.obstacles is not None),
+        'chamber_pressures': (lambda n: to_string_msg(ChamberPressures({'PEA': 1e4})),
+                              lambda n, out: n.pressures is not None),
+        'camera/image_raw': (lambda n: _camera_image(), lambda n, out: n.image is not None),
+        'ball_tracker/debug_image': (lambda n: _camera_image(),
+                                     lambda n, out: n.debug_image is not None),
+        'camera/camera_info': (lambda n: CameraInfo(**CAMERA.camera_info_fields()),
+                               lambda n, out: n.camera is not None)}),
     'joint_state_monitor': NodeCase(JointStateMonitor, valid={
         'joint_states': (lambda n: JointState(name=['joint_1'], position=[0.1]),
                          lambda n, out: n.latest is not None)}),
