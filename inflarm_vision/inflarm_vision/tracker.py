@@ -14,7 +14,11 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    rays in the channel that best separates the ball's own samples from its surround (Fisher's
    discriminant, levels measured), then a fine pass with rays from that outline's centre in
    the best channel **blind to the ball's colour** (Fisher's discriminant in the plane of BGR
-   orthogonal to it: the ball reads 0 however it is shaded). On each ray the edge is where the
+   orthogonal to it: the ball reads 0 however it is shaded). JPEG (4:2:0) halves the chroma's
+   resolution and quantizes it coarsely, and the ball-blind channel is mostly chroma: where
+   the fine pass finds less than 90 % of the outline, it is measured again in **luma** (full
+   resolution; each ray's inside level measured, either polarity), the better kept; luma is
+   also the last resort of the coarse pass. On each ray the edge is where the
    signal crosses half-way between the inside and outside levels (`_edges`); a ray counts only
    if it is inside the ball just before its edge. The edge points are moved out by the blur's
    shift of a curved edge, ``sigma^2 / (2 r)``.
@@ -190,9 +194,15 @@ _MIN_SEPARATION = 2.0  # of the ball-blind channel, below which the best of all 
 _INSIDE_TOLERANCE = 0.35  # share of the edge's contrast a ray's inside level may be off
 _SAME_COLOUR = 0.97  # cosine of the angle within which a colour is the ball's
 _MIN_TOLERANCE_PX = 0.6  # smallest distance of an inlier from the fitted outline [px]
-_MAX_HIDDEN_ARC = 0.42  # share of the outline another thing may hide (the spec: 30 %)
+_MAX_HIDDEN_ARC = 0.36  # share of the outline another thing may hide (the spec: 30 %)
+# the same below _COARSE_MIN_RADIUS_PX: on a few pixels of outline a small cap of a larger
+# yellow shape (a corner, the end of a half disc) passes for a ball hidden by 30 %
+_MAX_HIDDEN_ARC_SMALL = 0.28
 _COARSE_MIN_RADIUS_PX = 8.0  # smaller guesses: too few samples for the levels of the coarse pass
 _RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discriminant
+_LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BGR order
+_MIN_LUMA_CONTRAST = 10.0  # smallest step of luma across an edge of the luma pass [grey levels]
+_CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures it again
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
@@ -263,21 +273,34 @@ def _crossing(z: npt.NDArray, start: npt.NDArray | float) -> npt.NDArray[np.floa
     return np.where((below > 0) & (below < m), start + _STEP * position, np.nan)
 
 
-def _normalized(signal: npt.NDArray, lo, hi) -> npt.NDArray:
+def _normalized(signal: npt.NDArray, lo, hi, min_contrast: float | None = None) -> npt.NDArray:
     """``(signal - lo) / (hi - lo)`` per row (``lo`` a scalar or per row), NaN where
-    ``hi <= lo``."""
+    ``hi <= lo``, or with ``min_contrast`` where ``|hi - lo| < min_contrast`` (either
+    polarity)."""
     lo = np.reshape(lo, (-1, 1))
     span = np.reshape(hi, (-1, 1)) - lo
+    ok = span > 0.0 if min_contrast is None else np.abs(span) >= min_contrast
     with np.errstate(invalid='ignore', divide='ignore'):
-        return (signal - lo) / np.where(span > 0.0, span, np.nan)
+        return (signal - lo) / np.where(ok, span, np.nan)
 
 
-def _line_at(values: npt.NDArray, offset: int) -> npt.NDArray:
+def _line_at(values: npt.NDArray, offset, weights: npt.NDArray | None = None) -> npt.NDArray:
     """Per row, the least-squares line through ``values`` (sampled every ``_STEP``, the first
-    ``offset`` samples from a point) evaluated at that point."""
+    ``offset`` samples from a point, a scalar or per row) evaluated at that point; ``weights``
+    (0 or 1 per sample, optional) leave samples out. Rows of fewer than 3 samples give their
+    mean."""
     n = values.shape[1]
-    j = np.arange(n) - 0.5 * (n - 1)
-    return values.sum(axis=1) * (1.0 / n) - (values @ (j / (j @ j))) * (offset + 0.5 * (n - 1))
+    j = np.arange(n, dtype=np.float64)
+    if weights is None:
+        weights = np.ones_like(values)
+    count = weights.sum(axis=1)
+    mean_j = (weights @ j) / count
+    mean_v = (weights * values).sum(axis=1) / count
+    dj = j[None, :] - mean_j[:, None]
+    sjj = (weights * dj * dj).sum(axis=1)
+    slope = np.where(count >= 3, (weights * dj * values).sum(axis=1) / np.maximum(sjj, 1e-12),
+                     0.0)
+    return mean_v + slope * (-np.asarray(offset, dtype=np.float64) - mean_j)
 
 
 def _circular_mean(values: npt.NDArray, valid: npt.NDArray, k: int = 2) -> npt.NDArray:
@@ -290,7 +313,8 @@ def _circular_mean(values: npt.NDArray, valid: npt.NDArray, k: int = 2) -> npt.N
 
 def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: float,
            inside_level: float | None, usable: npt.NDArray[np.int64] | int,
-           sigma: float | None = None) -> tuple[npt.NDArray[np.float64], float]:
+           sigma: float | None = None,
+           min_contrast: float | None = None) -> tuple[npt.NDArray[np.float64], float]:
     """Sub-pixel edge on each ray and the edge's blur (standard deviation [px]).
 
     ``signal`` (n_rays, n_t) is sampled at ``t0 + k _STEP`` from the ray origin, rising from
@@ -298,7 +322,8 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     are in the image. A first pass takes half-way between the
     mean levels of the inner and outer parts of the search window ``|t - r0| <= half_width``,
     and the blur from the median 25 %-75 % width (1.349 sigma for a Gaussian blur) unless
-    ``sigma`` is given (tracking: the blur measured a few frames ago). Then the
+    ``sigma`` is given (tracking: the blur measured a few frames ago); with ``min_contrast``
+    the signal may fall as well as rise across the edge, by that much at least. Then the
     outside level is extrapolated to that edge from a line through the samples just beyond the
     blurred edge (texture gradients), averaged over neighbouring rays, and so is the inside
     level unless it is known (``inside_level``: 0 in the ball-blind channel, however the ball
@@ -314,7 +339,7 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     hi = signal[:, hi_k - quarter:hi_k].sum(axis=1) * (1.0 / quarter)
     lo = (inside_level if inside_level is not None
           else signal[:, lo_k:lo_k + quarter].sum(axis=1) * (1.0 / quarter))
-    z = _normalized(signal[:, lo_k:hi_k], lo, hi)
+    z = _normalized(signal[:, lo_k:hi_k], lo, hi, min_contrast)
     if sigma is None:
         found = _crossing(np.concatenate([z, z - 0.25, z + 0.25]), t0 + _STEP * lo_k)
         edge, q75, q25 = found[:n_rays], found[n_rays:2 * n_rays], found[2 * n_rays:]
@@ -335,18 +360,22 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     flat = signal.ravel()
     at = (np.arange(0, n_rays * n_t, n_t) + k)[:, None]  # flat index of each ray's edge sample
     beyond = flat[at + (gap + np.arange(length))]
-    # the window before the edge ends a gap inside it, or starts at the ray's first sample
-    start = -np.minimum(gap + length - 1, k)[:, None]
-    before = flat[at + (start + np.arange(length))]
-    start = start[:, 0]
+    # the window before the edge ends a gap inside it, and starts at the ray's first sample
+    # at the earliest
+    offsets = -(gap + length - 1) + np.arange(length)
+    inside_ray = (k[:, None] + offsets[None, :] >= 0).astype(np.float64)
+    before = flat[at + np.maximum(offsets[None, :], -k[:, None])]
     hi = _circular_mean(_line_at(beyond, gap), valid)
     if inside_level is None:
-        lo = _circular_mean(_line_at(before, start), valid)
+        lo = _circular_mean(_line_at(before, -(gap + length - 1), inside_ray), valid)
     # a ray crosses the ball's edge only if it is still inside the ball before it: its own
     # level there near the inside level (not where background lies on both sides of a
     # texture edge: the cut of a half disc)
-    valid &= before.mean(axis=1) - lo <= _INSIDE_TOLERANCE * (hi - lo)
-    edge = _crossing(_normalized(flat[at + np.arange(-gap, gap + 1)], lo, hi), e - _STEP * gap)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        valid &= (((before * inside_ray).sum(axis=1) / inside_ray.sum(axis=1) - lo) / (hi - lo)
+                  <= _INSIDE_TOLERANCE)
+    edge = _crossing(_normalized(flat[at + np.arange(-gap, gap + 1)], lo, hi, min_contrast),
+                     e - _STEP * gap)
     edge = np.where(valid, edge, np.nan)
     return edge + sigma * sigma / (2.0 * edge), sigma
 
@@ -469,14 +498,17 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
                ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
                margin_px: float = 0.0, sigma: float | None = None,
-               coarse: bool = False) -> BallDetection | None:
+               channel: str = 'blind') -> BallDetection | None:
     """Sub-pixel outline of a ball of colour ``ball_bgr`` near ``center`` with a radius near
     ``r0`` [px]: rays from ``center``, their edges (`_edges`, searched within
-    ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust fit (`_fit_outline`). ``coarse``: the
-    edges in the channel that best separates the ball from its surround whatever its shading
-    (to place a rough guess), else in the best ball-blind one. None if the colour is unknown or
-    too grey, the inside of the outline is not of that colour, or nothing around the ball
-    differs from it clearly."""
+    ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust fit (`_fit_outline`). The edges are
+    found in the ``channel``: ``'blind'``, the best ball-blind one (0 inside however the ball
+    is shaded); ``'coarse'``, the one that best separates the ball from its surround whatever
+    its shading (to place a rough guess); ``'luma'``, JPEG's luma (full resolution where JPEG
+    halves the chroma's), with each ray's inside level measured and either polarity (a shaded
+    ball is brighter than its surround on one side, darker on another). None if the colour is
+    unknown or too grey, the inside of the outline is not of that colour, or nothing around the
+    ball differs from it clearly."""
     if ball_bgr is None or np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma,
                                                                              1.0):
         return None
@@ -528,21 +560,25 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     weights = (w2 @ plane).astype(np.float32)
     inside_level = 0.0
     separation = _separation(inside, outside, weights)
-    if coarse or separation < _MIN_SEPARATION:
+    if channel == 'luma':
+        weights, inside_level = _LUMA, None
+    elif channel == 'coarse' or separation < _MIN_SEPARATION:
         full = _fisher(inside, outside).astype(np.float32)
         if (full_separation := _separation(inside, outside, full)) > separation:
             weights, inside_level, separation = full, None, full_separation
-    if separation < _ACCEPT_SEPARATION:
+    if channel != 'luma' and separation < _ACCEPT_SEPARATION:
         return None  # nothing around it differs from it clearly enough to be its edge
     signal = samples @ weights
-    edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma)
+    edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma,
+                         min_contrast=_MIN_LUMA_CONTRAST if channel == 'luma' else None)
     directions = np.stack([cos, sin], axis=1)
     points = center + edge[:, None] * directions
     result = _fit_outline(points, center, directions, edge, r0)
     if result is None:
         return None
     fit, inliers = result
-    if not _one_hidden_arc(inliers):
+    if not _one_hidden_arc(inliers, _MAX_HIDDEN_ARC if r0 >= _COARSE_MIN_RADIUS_PX
+                           else _MAX_HIDDEN_ARC_SMALL):
         return None
     (cx, cy), (fw, fh), angle = fit
     a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)
@@ -554,10 +590,10 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
                          blur_px=sigma)
 
 
-def _one_hidden_arc(inliers: npt.NDArray[np.bool_]) -> bool:
+def _one_hidden_arc(inliers: npt.NDArray[np.bool_], max_hidden: float) -> bool:
     """Whether the rays off the outline (round the ball, in order) are what a ball partly
     hidden by one thing leaves: at most one long run of them (over a tenth of the rays), of at
-    most `_MAX_HIDDEN_ARC` of the rays; short runs are texture and highlights. A bar of the
+    most ``max_hidden`` of the rays; short runs are texture and highlights. A bar of the
     ball's colour (two long runs), or a half disc (one of half the rays), is no ball."""
     n = len(inliers)
     if inliers.all():
@@ -567,7 +603,7 @@ def _one_hidden_arc(inliers: npt.NDArray[np.bool_]) -> bool:
     edges = np.diff(np.concatenate([[0], off.astype(np.int8), [0]]))
     runs = np.nonzero(edges == -1)[0] - np.nonzero(edges == 1)[0]
     long_runs = runs[runs > max(2, 0.1 * n)]
-    return len(long_runs) <= 1 and (len(long_runs) == 0 or long_runs[0] <= _MAX_HIDDEN_ARC * n)
+    return len(long_runs) <= 1 and (len(long_runs) == 0 or long_runs[0] <= max_hidden * n)
 
 
 def _accept(detection: BallDetection | None, params: DetectorParams) -> bool:
@@ -596,18 +632,32 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
             params: DetectorParams, margin_px: float, colour: npt.NDArray | None = None,
             sigma: float | None = None) -> BallDetection | None:
     """The ball's outline from a rough centre and radius: `_refine_at` with a search window
-    widened by ``margin_px`` (the uncertainty of the guess), then again from that outline's
-    centre and radius with the narrow window. ``colour`` is the ball's (measured on the disc
+    widened by ``margin_px`` (the uncertainty of the guess; in the coarse channel, else, if
+    that fails, the ball-blind one, then luma), then again from that outline's centre and
+    radius with the narrow window in the ball-blind channel, and in luma when that finds less
+    than `_CONFIDENT` of the outline (JPEG's chroma: half the resolution, coarser
+    quantization), the better of the two kept. ``colour`` is the ball's (measured on the disc
     when not given)."""
     if colour is None:
         colour = _disc_colour(image, center, r0, params)
-    first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
-                       coarse=r0 >= _COARSE_MIN_RADIUS_PX)
-    if first is None:
+    first = None
+    for channel in (('coarse', 'blind', 'luma') if r0 >= _COARSE_MIN_RADIUS_PX
+                    else ('blind', 'luma')):
+        first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
+                           channel=channel)
+        if first is not None:
+            break
+    else:
         return None
     # the outline measured again with rays from its own centre: from an off-centre start the
     # rays meet a part of the outline more often than its share of it
-    return _refine_at(image, first.center, first.radius, colour, params, sigma=sigma)
+    fine = _refine_at(image, first.center, first.radius, colour, params, sigma=sigma)
+    if fine is None or fine.confidence < _CONFIDENT:
+        in_luma = _refine_at(image, first.center, first.radius, colour, params, sigma=sigma,
+                             channel='luma')
+        if in_luma is not None and (fine is None or in_luma.confidence > fine.confidence):
+            return in_luma
+    return fine
 
 
 def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], scale: float,
