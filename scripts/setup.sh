@@ -25,8 +25,9 @@ if [ "$(cat .venv/.requirements.sha256 2>/dev/null)" != "$req_hash" ]; then
 fi
 
 # --symlink-install links the Python sources, so editing a module needs no rebuild; only the
-# package metadata, entry points and installed data files do.
-packages=(inflarm_*/)
+# package metadata, entry points and installed data files do. tests/ is the package inflarm_tests
+# (the suite, for `colcon test`).
+packages=(inflarm_*/ tests/)
 build_hash=$(find "${packages[@]}" -type f \( -name setup.py -o -name setup.cfg \
     -o -name package.xml -o -path '*/resource/*' -o -path '*/config/*' -o -path '*/schema/*' \
     -o -path '*/urdf/*' -o -path '*/launch/*' -o -path '*/rviz/*' \) \
