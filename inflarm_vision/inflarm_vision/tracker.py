@@ -633,10 +633,8 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
             sigma: float | None = None) -> BallDetection | None:
     """The ball's outline from a rough centre and radius: `_refine_at` with a search window
     widened by ``margin_px`` (the uncertainty of the guess; in the coarse channel, else, if
-    that fails, the ball-blind one, then luma), then again from that outline's centre and
-    radius with the narrow window in the ball-blind channel, and in luma when that finds less
-    than `_CONFIDENT` of the outline (JPEG's chroma: half the resolution, coarser
-    quantization), the better of the two kept. ``colour`` is the ball's (measured on the disc
+    that fails, the ball-blind one, then luma), then `_fine` from that outline's centre and
+    radius with the narrow window. ``colour`` is the ball's (measured on the disc
     when not given)."""
     if colour is None:
         colour = _disc_colour(image, center, r0, params)
@@ -651,10 +649,19 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
         return None
     # the outline measured again with rays from its own centre: from an off-centre start the
     # rays meet a part of the outline more often than its share of it
-    fine = _refine_at(image, first.center, first.radius, colour, params, sigma=sigma)
+    return _fine(image, first.center, first.radius, colour, params, sigma=sigma)
+
+
+def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
+          colour: npt.NDArray, params: DetectorParams, margin_px: float = 0.0,
+          sigma: float | None = None) -> BallDetection | None:
+    """The fine pass (`_refine_at` in the ball-blind channel), and again in luma when it finds
+    less than `_CONFIDENT` of the outline (JPEG's chroma: half the resolution, coarser
+    quantization): the one of higher confidence."""
+    fine = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma)
     if fine is None or fine.confidence < _CONFIDENT:
-        in_luma = _refine_at(image, first.center, first.radius, colour, params, sigma=sigma,
-                             channel='luma')
+        in_luma = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
+                             sigma=sigma, channel='luma')
         if in_luma is not None and (fine is None or in_luma.confidence > fine.confidence):
             return in_luma
     return fine
@@ -876,9 +883,9 @@ class BallTracker:
             self._frames += 1
             sigma = None if self._frames % 16 == 0 else last.blur_px
             # the predicted outline is the fine pass's guess already
-            detection = _refine_at(image, last.center + velocity, last.radius,
-                                   last.colour_bgr, self.params,
-                                   margin_px=1.0 + float(np.hypot(*velocity)), sigma=sigma)
+            detection = _fine(image, last.center + velocity, last.radius, last.colour_bgr,
+                              self.params, margin_px=1.0 + float(np.hypot(*velocity)),
+                              sigma=sigma)
             if not _accept(detection, self.params):
                 half = self.search_radii * last.radius + self.search_margin_px
                 u, v = last.center + velocity
