@@ -43,6 +43,7 @@ off the optical axis the ellipse's centre is not the image of the ball's centre.
 from dataclasses import dataclass
 import functools
 import math
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -203,6 +204,7 @@ _RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discrimina
 _LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BGR order
 _MIN_LUMA_CONTRAST = 10.0  # smallest step of luma across an edge of the luma pass [grey levels]
 _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures it again
+_SHAPE_FOUND = 0.85  # share of rays with an edge beyond which a refused outline is no ball's
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
@@ -495,10 +497,18 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
     return fit, inliers
 
 
+class _Pass(NamedTuple):
+    """What a pass of `_refine_at` found: the ball or None, and the share of its rays on which
+    an edge was found."""
+
+    detection: BallDetection | None
+    edge_share: float
+
+
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
                ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
                margin_px: float = 0.0, sigma: float | None = None,
-               channel: str = 'blind') -> BallDetection | None:
+               channel: str = 'blind') -> '_Pass':
     """Sub-pixel outline of a ball of colour ``ball_bgr`` near ``center`` with a radius near
     ``r0`` [px]: rays from ``center``, their edges (`_edges`, searched within
     ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust fit (`_fit_outline`). The edges are
@@ -508,10 +518,10 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     halves the chroma's), with each ray's inside level measured and either polarity (a shaded
     ball is brighter than its surround on one side, darker on another). None if the colour is
     unknown or too grey, the inside of the outline is not of that colour, or nothing around the
-    ball differs from it clearly."""
+    ball differs from it clearly; with the share of the rays on which an edge was found."""
     if ball_bgr is None or np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma,
                                                                              1.0):
-        return None
+        return _Pass(None, 0.0)
     blind, chroma = _channels(ball_bgr)
     n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
     cos, sin = _ray_directions(n_rays)
@@ -536,7 +546,7 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     strength = float(np.dot(ball_bgr, chroma))
     inner = max(1, int((r0 - half_width - t0) / _STEP))
     if not (samples[:, :inner] @ chroma).mean() > 0.5 * strength:
-        return None
+        return _Pass(None, 0.0)
     # the edge's signal: of the channels blind to the ball's colour (the plane orthogonal to
     # it in BGR: 0 inside however the ball is shaded), the one that best separates the ball's
     # samples from those around it (Fisher's discriminant in that plane); where nothing
@@ -552,7 +562,7 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     along = inside @ unit
     own = along > _SAME_COLOUR * np.sqrt(np.einsum('ij,ij->i', inside, inside))
     if own.sum() < 8:
-        return None
+        return _Pass(None, 0.0)
     inside = inside[own]
     other = np.cross(unit, blind)
     plane = np.stack([blind, other / np.linalg.norm(other)])  # (2, 3)
@@ -567,27 +577,28 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
         if (full_separation := _separation(inside, outside, full)) > separation:
             weights, inside_level, separation = full, None, full_separation
     if channel != 'luma' and separation < _ACCEPT_SEPARATION:
-        return None  # nothing around it differs from it clearly enough to be its edge
+        return _Pass(None, 0.0)  # nothing around it differs from it clearly enough to be its edge
     signal = samples @ weights
     edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma,
                          min_contrast=_MIN_LUMA_CONTRAST if channel == 'luma' else None)
+    edge_share = float(np.isfinite(edge).mean())
     directions = np.stack([cos, sin], axis=1)
     points = center + edge[:, None] * directions
     result = _fit_outline(points, center, directions, edge, r0)
     if result is None:
-        return None
+        return _Pass(None, edge_share)
     fit, inliers = result
     if not _one_hidden_arc(inliers, _MAX_HIDDEN_ARC if r0 >= _COARSE_MIN_RADIUS_PX
                            else _MAX_HIDDEN_ARC_SMALL):
-        return None
+        return _Pass(None, edge_share)
     (cx, cy), (fw, fh), angle = fit
     a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)
     major = math.radians(angle) if fw >= fh else math.radians(angle) + 0.5 * math.pi
     major = (major + 0.5 * math.pi) % math.pi - 0.5 * math.pi
-    return BallDetection(center=np.array([cx, cy]), radius=math.sqrt(a * b),
-                         confidence=float(inliers.mean()), axes=np.array([a, b]),
-                         angle=major, edge_points=points[inliers], colour_bgr=ball_bgr,
-                         blur_px=sigma)
+    return _Pass(BallDetection(center=np.array([cx, cy]), radius=math.sqrt(a * b),
+                               confidence=float(inliers.mean()), axes=np.array([a, b]),
+                               angle=major, edge_points=points[inliers],
+                               colour_bgr=ball_bgr, blur_px=sigma), edge_share)
 
 
 def _one_hidden_arc(inliers: npt.NDArray[np.bool_], max_hidden: float) -> bool:
@@ -633,18 +644,19 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
             sigma: float | None = None) -> BallDetection | None:
     """The ball's outline from a rough centre and radius: `_refine_at` with a search window
     widened by ``margin_px`` (the uncertainty of the guess; in the coarse channel, else, if
-    that fails, the ball-blind one, then luma), then `_fine` from that outline's centre and
-    radius with the narrow window. ``colour`` is the ball's (measured on the disc
-    when not given)."""
+    that fails for want of edges, the ball-blind one, then luma), then `_fine` from that
+    outline's centre and radius with the narrow window. ``colour`` is the ball's (measured on
+    the disc when not given)."""
     if colour is None:
         colour = _disc_colour(image, center, r0, params)
-    first = None
     for channel in (('coarse', 'blind', 'luma') if r0 >= _COARSE_MIN_RADIUS_PX
                     else ('blind', 'luma')):
-        first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
-                           channel=channel)
+        first, edge_share = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
+                                       sigma=sigma, channel=channel)
         if first is not None:
             break
+        if edge_share >= _SHAPE_FOUND:
+            return None  # the outline was found, and is no ball's: so it is in any channel
     else:
         return None
     # the outline measured again with rays from its own centre: from an off-centre start the
@@ -658,10 +670,11 @@ def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: flo
     """The fine pass (`_refine_at` in the ball-blind channel), and again in luma when it finds
     less than `_CONFIDENT` of the outline (JPEG's chroma: half the resolution, coarser
     quantization): the one of higher confidence."""
-    fine = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma)
+    fine = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
+                      sigma=sigma).detection
     if fine is None or fine.confidence < _CONFIDENT:
         in_luma = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
-                             sigma=sigma, channel='luma')
+                             sigma=sigma, channel='luma').detection
         if in_luma is not None and (fine is None or in_luma.confidence > fine.confidence):
             return in_luma
     return fine
