@@ -97,14 +97,16 @@ def test_command_seq_is_the_hellos_until_a_command_is_applied():
     host.send(valves())
     state = messages(host.step(), State)[-1]
     assert state.command_seq == command_seq and not state.status & StatusFlag.WATCHDOG
-    # a new session forgets the commands of the old one
+    # a new session forgets the commands of the old one, and starts safe
     hello_seq = host.seq
     host.send(Hello())
-    assert messages(host.step(), State)[-1].command_seq == hello_seq
+    state = messages(host.step(), State)[-1]
+    assert state.command_seq == hello_seq and state.status & StatusFlag.WATCHDOG
+    np.testing.assert_array_equal(host.mcu.chamber_voltage, 0.0)
 
 
 @pytest.mark.parametrize('command', [valves, position], ids=['valves only', 'motors only'])
-def test_one_watchdog_is_fed_by_either_command_type(command):
+def test_one_watchdog_is_fed_by_either_command_type_not_by_heartbeats(command):
     host = Host()
     host.send(Hello(watchdog_ms=100))
     for _ in range(25):  # 0.5 s, a command every 40 ms
@@ -112,7 +114,10 @@ def test_one_watchdog_is_fed_by_either_command_type(command):
         frames = host.step(0.04)
         assert not messages(frames, Fault)
         assert not messages(frames, State)[-1].status & StatusFlag.WATCHDOG
-    frames = host.step(0.2)  # no command for 200 ms > 100 ms
+    frames = []
+    for _ in range(5):  # no command for 200 ms > 100 ms; heartbeats do not feed it
+        host.send(Heartbeat(0))
+        frames += host.step(0.04)
     (fault,) = messages(frames, Fault)
     assert fault.code == FaultCode.WATCHDOG and fault.channel == 0
     assert 0.1 < fault.value <= 0.1 + DT + 1e-9  # seconds since the last command
@@ -230,3 +235,17 @@ def test_fault_inject_that_cannot_be_done_says_its_channel_and_kind():
     (fault,) = messages(real.send(FaultInject(FaultKind.SILENT, 0, 0.0, 1.0)), Fault)
     assert (fault.code, fault.channel, fault.value) == (
         FaultCode.INJECTION_UNSUPPORTED, 0, float(FaultKind.SILENT))
+
+
+def test_channels_the_mcu_lacks_are_ignored_but_every_voltage_must_be_finite():
+    host = Host('sra')
+    host.send(Hello())
+    # no motors: a MOTOR_COMMAND is taken as it is, unread (the bridge sends none)
+    assert messages(host.send(MotorCommand(9, (math.nan,) * 3)), Fault) == []
+    assert messages(host.step(), State)[-1].command_seq == host.seq - 1
+    # no links: their voltages are ignored, but a non-finite one makes the frame invalid
+    assert messages(host.send(ValveCommand((1.0,) * 5, (7.0, 7.0))), Fault) == []
+    (fault,) = messages(host.send(ValveCommand((2.0,) * 5, (math.nan, 0.0))), Fault)
+    assert (fault.code, fault.channel) == (FaultCode.COMMAND_INVALID, MessageType.VALVE_COMMAND)
+    np.testing.assert_array_equal(host.mcu.chamber_voltage, 1.0)
+    assert messages(host.step(), State)[-1].link_pressure == (0.0, 0.0)
