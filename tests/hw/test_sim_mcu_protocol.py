@@ -159,6 +159,8 @@ def test_an_invalid_command_is_ignored_reported_per_frame_type_and_rate_limited(
     host.now += FAULT_REPEAT_S
     assert [f.channel for f in messages(host.send(nan_valves), Fault)] == [
         MessageType.VALVE_COMMAND]
+    host.send(Hello())  # a new session does not restart the window
+    assert messages(host.send(nan_valves), Fault) == []
 
 
 def test_fields_a_mode_does_not_use_are_ignored():
@@ -222,6 +224,9 @@ def test_a_hello_of_another_version_ends_the_session_safe_and_opens_none():
     faults = messages(host.send(valves()), Fault)
     assert [(f.code, f.channel) for f in faults] == [
         (FaultCode.NO_SESSION, MessageType.VALVE_COMMAND)]
+    # every such HELLO is answered alike (not rate-limited)
+    frames = host.send(Hello(protocol_version=2, watchdog_ms=100))
+    assert [(f.seq, type(f.message)) for f in frames] == [(0, HelloAck), (1, Fault)]
 
 
 def test_fault_inject_that_cannot_be_done_says_its_channel_and_kind():
