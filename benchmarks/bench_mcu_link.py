@@ -8,7 +8,8 @@ Prints, with baselines measured in the same run:
 - `encode_frame` of a MotorCommand, per frame [us], against ``struct.pack`` of its payload;
 - one bridge cycle of `SafetySupervisor` (``on_state`` + ``output``, eq. (2) included) [us],
   against the cycle period at the default 100 Hz;
-- the link load at the defaults (100 Hz commands, 50 Hz STATE) against 921600 baud.
+- the link load at the defaults (100 Hz commands, 50 Hz STATE, 10 Hz HEARTBEAT and its answer)
+  against 921600 baud.
 
 Candidates are timed round-robin (``common.interleaved``); compare the ratios more than the
 absolute numbers.
@@ -25,9 +26,10 @@ from common import Row, interleaved, print_rows
 import numpy as np
 
 from inflarm_hw.bridge import BridgeConfig, SafetySupervisor
-from inflarm_hw.driver import DeviceInfo
+from inflarm_hw.driver import HEARTBEAT_PERIOD_S, DeviceInfo
 from inflarm_hw.mcu_protocol import (
     FrameDecoder,
+    Heartbeat,
     MotorCommand,
     MotorMode,
     State,
@@ -78,8 +80,9 @@ def measure(frames: int, rounds: int) -> dict:
         'pack': lambda: command.LAYOUT.pack(1, 0.1, 0.6, -1.2, 0.0, 0.1, 0.0, 0.0, 0.0, 0.0),
         'cycle': cycle,
     }, rounds)
-    tx = 100 * (len(encode_frame(command, 0)) + len(encode_frame(ValveCommand(), 0)))
-    rx = 50 * len(encode_frame(states[0], 0))
+    heartbeat = len(encode_frame(Heartbeat(0), 0)) / HEARTBEAT_PERIOD_S  # and its answer
+    tx = 100 * (len(encode_frame(command, 0)) + len(encode_frame(ValveCommand(), 0))) + heartbeat
+    rx = 50 * len(encode_frame(states[0], 0)) + heartbeat
     return {'frame_bytes': len(stream) / frames,
             'decode': streams['decode'].median_s / frames,
             'floor': streams['floor'].median_s / frames,
@@ -120,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{m['pack'] * 1e6:.2f} us: x{m['encode'] / m['pack']:.1f}")
     print(f"bridge cycle (on_state + output): {m['cycle'] * 1e6:.0f} us, the 100 Hz period "
           f"{CYCLE_S * 1e6:.0f} us: {m['cycle'] / CYCLE_S * 100:.2f} % of it")
-    print(f"link load: host -> MCU {m['tx']} B/s, MCU -> host {m['rx']} B/s; {BAUD} baud "
+    print(f"link load: host -> MCU {m['tx']:.0f} B/s, MCU -> host {m['rx']:.0f} B/s; {BAUD} baud "
           f"carries {m['line']:.0f} B/s: {m['tx'] / m['line'] * 100:.1f} % and "
           f"{m['rx'] / m['line'] * 100:.1f} %")
     print()

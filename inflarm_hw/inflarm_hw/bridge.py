@@ -5,9 +5,10 @@ what `SafetySupervisor.output` returns through the driver (`inflarm_hw.driver`).
 bridge decides about safety is in this module, so each rule has a test without ROS:
 
 - **Validation** (`check_motor_command`, `check_pressure_command`, `check_config`): non-finite
-  values, unknown names and positions outside the joint limits are rejected with a
-  ``ValueError`` naming the problem; pressures above the chamber limit (or below 0) and
-  feed-forward velocities above the motor limit are clamped, and the clamping is reported.
+  values, unknown names, positions outside the joint limits and set pressures outside
+  ``[0, chamber_pressure_max]`` (the chamber's rating) reject the command whole with a
+  ``ValueError`` naming the problem; feed-forward velocities above the motor limit are
+  clamped, and the clamping is reported.
 - **Command watchdog** on a steady clock: no fresh motor command within ``cmd_timeout_s`` ->
   motors hold (or zero torque); no fresh pressure command -> chambers to the safe pressure.
 - **Limits**: chamber set points within ``[0, chamber_pressure_max]``, link set points within

@@ -42,6 +42,9 @@ from inflarm_hw.mcu_protocol import (
     encode_frame,
 )
 
+#: How often the bridge sends a HEARTBEAT to measure the round trip [s] (10 Hz).
+HEARTBEAT_PERIOD_S = 0.1
+
 
 class McuError(Exception):
     """The MCU cannot be reached or spoken to; the message says why."""

@@ -15,7 +15,8 @@ A frame on the wire is ``COBS(header + payload + crc32) + 0x00``:
 
 `FrameDecoder` takes arbitrary bytes and returns the valid frames; bad frames (COBS error, too
 short or too long, wrong CRC, unknown type, wrong payload length) are counted and skipped, and it
-resynchronises on the next 0x00.
+resynchronises on the next 0x00. It counts the frames lost between valid ones from their
+sequence numbers; a HELLO or HELLO_ACK starts a session, and with it the count afresh.
 """
 
 from __future__ import annotations
@@ -44,7 +45,6 @@ MAX_ENCODED = MAX_FRAME + MAX_FRAME // 254 + 1
 N_MOTORS, N_CHAMBERS, N_LINKS = 3, 5, 2
 #: Pressure sensor channels, as numbered in FaultInject and Fault: chambers, then links.
 PRESSURE_CHANNELS = N_CHAMBERS + N_LINKS
-
 
 class MessageType(enum.IntEnum):
     """Message type byte of the header."""
@@ -87,7 +87,8 @@ class FaultCode(enum.IntEnum):
     NO_SESSION = 4  # a command before a successful HELLO: ignored
     VERSION_MISMATCH = 5  # HELLO of another protocol version: no session
     INJECTION_UNSUPPORTED = 6  # FAULT_INJECT on real hardware, or an unknown kind
-    PLANT = 7  # simulated MCU: the simulated arm has no equilibrium (value: motor index)
+    PLANT = 7  # simulated MCU: the simulated arm has no equilibrium
+    # channel and value of each code, and which codes are rate-limited: README "FAULT"
 
 
 class FaultKind(enum.IntEnum):
@@ -354,6 +355,9 @@ class FrameDecoder:
         """Forget the last sequence number (a new session restarts the sender's count)."""
         self._last_seq = None
 
+    #: Types that start a session: no frame counts as lost before them.
+    SESSION_TYPES: ClassVar[frozenset] = frozenset({MessageType.HELLO, MessageType.HELLO_ACK})
+
     def feed(self, data: bytes) -> list[Frame]:
         """Decode ``data`` (any bytes, any split) and return the frames it completes."""
         self.stats.bytes += len(data)
@@ -410,7 +414,7 @@ class FrameDecoder:
         except ValueError:
             self.stats.length_errors += 1
             return None
-        if self._last_seq is not None:
+        if self._last_seq is not None and kind not in self.SESSION_TYPES:
             gap = (seq - self._last_seq - 1) & 0xFFFF
             if gap < 0x8000:  # else a repeat or a restart: not a loss
                 self.stats.lost += gap

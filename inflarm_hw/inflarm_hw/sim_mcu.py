@@ -63,8 +63,13 @@ from inflarm_hw.valve import ITV2050, ValveModel, pressure_to_voltage, voltage_t
 
 # Lowest link pressure handed to the arm's wrinkling model (it needs a positive one) [Pa].
 _MIN_MODEL_LINK_PRESSURE = 100.0
-# Repeated fault events of one code are sent at most this often [s].
-_FAULT_REPEAT_S = 1.0
+#: Fault events of these codes come with frames or steps, so they are rate-limited: one per
+#: (code, channel) within `FAULT_REPEAT_S`. The others are one-off events (a watchdog trip, an
+#: answer to a HELLO or a FAULT_INJECT) and are always sent.
+RATE_LIMITED_FAULTS = frozenset({FaultCode.COMMAND_INVALID, FaultCode.MODE_UNSUPPORTED,
+                                 FaultCode.NO_SESSION, FaultCode.PLANT})
+#: A rate-limited fault event of one (code, channel) is sent at most this often [s].
+FAULT_REPEAT_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -171,7 +176,7 @@ class SimMcu:
         self._stuck: dict[int, float] = {}
         self._tx_seq = 0
         self._rx_base = (0, 0)
-        self._fault_sent: dict[int, float] = {}
+        self._fault_sent: dict[tuple[int, int], float] = {}
         self._hold()
 
     # -- bytes in, bytes out ---------------------------------------------------------------
@@ -179,10 +184,9 @@ class SimMcu:
     def receive(self, data: bytes, now: float) -> bytes:
         """Take bytes from the serial line at time ``now`` [s]; return the reply bytes."""
         self._expire(now)
-        replies: list[Message] = []
-        for frame in self.decoder.feed(data):
-            replies += self._handle(frame.seq, frame.message, now)
-        return self._transmit(replies)
+        # frame by frame: the replies to a HELLO are numbered from 0
+        return b''.join(self._transmit(self._handle(frame.seq, frame.message, now))
+                        for frame in self.decoder.feed(data))
 
     def step(self, dt: float, now: float) -> bytes:
         """Advance the plants ``dt`` seconds to ``now``; return the State report (and any
@@ -259,54 +263,58 @@ class SimMcu:
 
     def _handle(self, seq: int, message: Message, now: float) -> list[Message]:
         if isinstance(message, Hello):
-            return self._hello(message, now)
+            return self._hello(seq, message)
         if isinstance(message, Heartbeat):
             return [HeartbeatAck(message.time_ms)]
         if isinstance(message, FaultInject):
+            unsupported = [Fault(FaultCode.INJECTION_UNSUPPORTED, message.channel,
+                                 float(message.kind))]
             if not self.params.allow_injection:
-                return [Fault(FaultCode.INJECTION_UNSUPPORTED, message.channel)]
+                return unsupported
             try:
                 self.inject(message.kind, message.channel, message.value, message.duration_s,
                             now)
             except ValueError:
-                return [Fault(FaultCode.INJECTION_UNSUPPORTED, message.channel, message.value)]
+                return unsupported
             return []
         if not isinstance(message, (MotorCommand, ValveCommand)):
             return []  # MCU -> host types: not for the MCU
         if not self.session:
-            return self._fault_once(FaultCode.NO_SESSION, now)
-        replies = self._motor(message) if isinstance(message, MotorCommand) \
+            return self._fault_once(FaultCode.NO_SESSION, int(message.TYPE), 0.0, now)
+        replies = self._motor(message, now) if isinstance(message, MotorCommand) \
             else self._valves(message)
         if replies is None:
-            return self._fault_once(FaultCode.COMMAND_INVALID, now)
+            return self._fault_once(FaultCode.COMMAND_INVALID, int(message.TYPE), 0.0,
+                                    now)
         self.command_seq = seq
         self.last_command_time = now
         self.watchdog_tripped = False
         return replies
 
-    def _hello(self, hello: Hello, now: float) -> list[Message]:
+    def _hello(self, seq: int, hello: Hello) -> list[Message]:
+        """Every HELLO ends the session there is (outputs safe) and restarts the MCU's
+        numbering: the reply is frame 0. One of this version opens a new session."""
         p = self.params
+        self._tx_seq = 0
+        self.last_command_time = None
+        self.watchdog_tripped = True
+        self._safe()
         if hello.protocol_version != p.protocol_version:
             self.session = False
-            return [self._hello_ack(), Fault(FaultCode.VERSION_MISMATCH, 0,
-                                             float(hello.protocol_version))]
+            return [HelloAck(p.protocol_version, p.firmware_version, 0, self.n_motors,
+                             self.n_chambers, self.n_links),
+                    Fault(FaultCode.VERSION_MISMATCH, 0, float(hello.protocol_version))]
         requested = hello.watchdog_ms / 1000.0
         self.watchdog_s = (p.default_watchdog_s if requested == 0.0
                            else min(max(requested, p.min_watchdog_s), p.max_watchdog_s))
         self.session = True
-        self.decoder.reset_sequence()
+        # the decoder restarts its gap count at a HELLO; the counters restart here
         self._rx_base = (self.decoder.stats.bad_frames, self.decoder.stats.lost)
-        self.last_command_time = None
-        self.watchdog_tripped = True
-        self._safe()
-        return [self._hello_ack()]
+        self.command_seq = seq  # until a command is applied: not newer than any of them
+        return [HelloAck(p.protocol_version, p.firmware_version, round(self.watchdog_s * 1000),
+                         self.n_motors, self.n_chambers, self.n_links)]
 
-    def _hello_ack(self) -> HelloAck:
-        return HelloAck(self.params.protocol_version, self.params.firmware_version,
-                        round(self.watchdog_s * 1000), self.n_motors, self.n_chambers,
-                        self.n_links)
-
-    def _motor(self, command: MotorCommand) -> list[Message] | None:
+    def _motor(self, command: MotorCommand, now: float) -> list[Message] | None:
         if self.arm is None:
             return []
         if command.mode == MotorMode.POSITION:
@@ -322,9 +330,10 @@ class SimMcu:
             self.motor_mode = MotorMode(command.mode)
             return []
         if command.mode == MotorMode.TORQUE:
+            if self.motor_mode != MotorMode.HOLD:
+                self._hold()
             self.motor_mode = MotorMode.HOLD
-            self._hold()
-            return [Fault(FaultCode.MODE_UNSUPPORTED, 0, float(command.mode))]
+            return self._fault_once(FaultCode.MODE_UNSUPPORTED, 0, float(command.mode), now)
         return None
 
     def _valves(self, command: ValveCommand) -> list[Message] | None:
@@ -368,7 +377,7 @@ class SimMcu:
             try:
                 self.arm_state = self.arm.step(dt)
             except RuntimeError:
-                out += self._fault_once(FaultCode.PLANT, now)
+                out += self._fault_once(FaultCode.PLANT, 0, 0.0, now)
         return out
 
     def _pressures(self) -> npt.NDArray[np.float64]:
@@ -412,12 +421,15 @@ class SimMcu:
 
     # -- transmission and its faults ------------------------------------------------------------
 
-    def _fault_once(self, code: FaultCode, now: float) -> list[Message]:
-        last = self._fault_sent.get(code)
-        if last is not None and now - last < _FAULT_REPEAT_S:
+    def _fault_once(self, code: FaultCode, channel: int, value: float,
+                    now: float) -> list[Message]:
+        """A rate-limited fault event: none if one of this (code, channel) went out within
+        `FAULT_REPEAT_S`."""
+        last = self._fault_sent.get((code, channel))
+        if last is not None and now - last < FAULT_REPEAT_S:
             return []
-        self._fault_sent[code] = now
-        return [Fault(code)]
+        self._fault_sent[(code, channel)] = now
+        return [Fault(code, channel, value)]
 
     def _transmit(self, messages: list[Message]) -> bytes:
         if not messages or self._active(FaultKind.SILENT):

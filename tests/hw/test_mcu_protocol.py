@@ -1,5 +1,6 @@
 """The MCU link protocol (inflarm_hw.mcu_protocol): round trips, framing, a fuzzed decoder."""
 
+import pathlib
 import struct
 import subprocess
 import sys
@@ -91,6 +92,36 @@ def test_sequence_numbers_wrap_and_gaps_count_as_lost():
     assert decoder.stats.lost == 2
     assert seq_newer_or_equal(2, 65530) and not seq_newer_or_equal(65530, 2)
     assert seq_newer_or_equal(7, 7)
+
+
+def test_a_hello_or_hello_ack_starts_the_count_of_lost_frames_afresh():
+    decoder = FrameDecoder()
+    ack = HelloAck(PROTOCOL_VERSION, 1, 250, 3, 5, 2)
+    # an old session's STATE numbers, then a new session from 0; the host's HELLO anywhere
+    stream = b''.join(encode_frame(m, seq) for m, seq in [
+        (Heartbeat(0), 40000), (ack, 0), (Heartbeat(1), 1), (Hello(), 9), (Heartbeat(2), 12)])
+    assert len(decoder.feed(stream)) == 5
+    assert decoder.stats.lost == 2  # 10 and 11 only
+
+
+def test_the_readme_bandwidth_is_that_of_the_frame_sizes():
+    """inflarm_hw/README.md "Bandwidth": sizes on the wire and the default link load."""
+    from inflarm_hw.driver import HEARTBEAT_PERIOD_S
+
+    size = {type(m).__name__: len(encode_frame(m, 0xFFFF)) for m in EXAMPLES}
+    assert all(size[type(m).__name__] == m.LAYOUT.size + 10 for m in EXAMPLES)
+    assert (size['MotorCommand'], size['ValveCommand'], size['Heartbeat'], size['State'],
+            size['Fault']) == (50, 38, 14, 86, 18)
+    heartbeats = size['Heartbeat'] / HEARTBEAT_PERIOD_S  # and as many HEARTBEAT_ACKs
+    host = 100 * (size['MotorCommand'] + size['ValveCommand']) + heartbeats
+    mcu = 50 * size['State'] + heartbeats
+    line = 921600 / 10  # 8N1
+    readme = (pathlib.Path(__file__).resolve().parents[2] / 'inflarm_hw' / 'README.md'
+              ).read_text()
+    text = ' '.join(readme.split())
+    assert f'{host:.0f} B/s' in text and f'{mcu:.0f} B/s' in text
+    assert f'{host / line * 100:.1f} % and {mcu / line * 100:.1f} % of the line' in text
+    assert f'({50 * (size["MotorCommand"] + size["ValveCommand"]) + heartbeats:.0f} B/s' in text
 
 
 def test_bad_frames_are_counted_by_kind_and_skipped():

@@ -22,7 +22,10 @@ Publishes (for the channels the MCU has, from configure on, one message per MCU 
     chamber_pressures (std_msgs/String: ChamberPressures JSON, RELIABLE_QOS): measured [Pa].
     link_pressures (std_msgs/String: LinkPressures JSON, RELIABLE_QOS): measured [Pa].
     ~/status (std_msgs/String: HardwareStatus JSON, LATCHED_QOS): outputs, link, faults; on
-        every change, and at least once a second.
+        every change, and at least once a second while configured. Without an MCU
+        (unconfigured, finalized) link 'closed', outputs 'none', and after a failed configure
+        the fault 'configure_failed' with the reason; published at start and after every
+        transition and configure attempt (autostart: every autostart_retry_s).
     diagnostics (diagnostic_msgs/DiagnosticArray, RELIABLE_QOS): about 1 Hz, always.
 Services:
     ~/reset_fault (std_srvs/Trigger): clear the latched faults once their cause is gone.
@@ -52,13 +55,20 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from inflarm_hw.bridge import LINKS, MOTORS, BridgeConfig, SafetySupervisor
-from inflarm_hw.driver import DriverConfig, LinkState, McuDriver, McuError
+from inflarm_hw.driver import (
+    HEARTBEAT_PERIOD_S,
+    DriverConfig,
+    LinkState,
+    McuDriver,
+    McuError,
+)
 from inflarm_hw.valve import ValveModel
 from inflarm_model.nodes.arm_parameters import ARM_PARAMETERS
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS
 from inflarm_model.urdf import JOINT_LIMITS
 from inflarm_msgs_json import (
     ChamberPressures,
+    HardwareStatus,
     LinkPressures,
     LinkStatus,
     MessageError,
@@ -84,7 +94,8 @@ PARAMETERS = (
     Parameter('baudrate', 921600, 'serial line speed [bit/s]', range=(9600, 12000000)),
     Parameter('rate_hz', 100.0, 'read/write cycle rate [Hz]', range=(10.0, 1000.0),
               read_only=True),
-    Parameter('autostart', False, 'configure and activate at start, retrying configure',
+    Parameter('autostart', False, 'configure and activate at start, retrying configure (node '
+              'default false: wait for a lifecycle manager; the launcher sets true)',
               read_only=True),
     Parameter('autostart_retry_s', 0.5, 'autostart: retry configure this often [s]',
               range=(0.05, 10.0), read_only=True),
@@ -104,8 +115,9 @@ PARAMETERS = (
               'upper joint limits of joint_1..joint_3 [rad]; commands above are rejected'),
     Parameter('limits.max_velocity_rad_s', 1.0, 'motor slew limit and largest feed-forward '
               '[rad/s]', range=(0.01, 10.0)),
-    Parameter('limits.chamber_pressure_max_pa', CHAMBER_MAX_PRESSURE, 'chamber rating: set '
-              'points are clamped to [0, this] [Pa]', range=(1000.0, 500000.0)),
+    Parameter('limits.chamber_pressure_max_pa', CHAMBER_MAX_PRESSURE, 'chamber rating: a '
+              'command with a set point outside [0, this] is rejected whole [Pa]',
+              range=(1000.0, 500000.0)),
     Parameter('limits.chamber_over_pressure_pa', 130000.0, 'a chamber reading above this '
               'vents and latches over_pressure [Pa]', range=(1000.0, 600000.0)),
     Parameter('limits.link_pressure_min_pa', 10000.0, 'lowest link set point [Pa]',
@@ -143,7 +155,6 @@ PARAMETERS = (
 )
 # The parameters read at configure (all but those applied at runtime or read-only).
 _RUNTIME = {'arm.link_pressure_pa'}
-_HEARTBEAT_PERIOD_S = 0.1
 
 
 def bridge_config(p: dict) -> BridgeConfig:
@@ -198,6 +209,7 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
         self._last_heartbeat = 0.0
         self._last_status = None
         self._last_status_time = 0.0
+        self._configure_error: str | None = None  # why the last configure failed
         self.status_pub = self.create_publisher(String, '~/status', LATCHED_QOS)
         self.diagnostics = DiagnosticsPublisher(self, self.diagnostic_status)
         self.create_guarded_service(Trigger, '~/reset_fault', self.on_reset_fault)
@@ -207,6 +219,7 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
         if self.params['autostart']:
             self._autostart = self.create_guarded_timer(self.params['autostart_retry_s'],
                                                         self.try_autostart)
+        self.publish_status(force=True)
         self.get_logger().info(
             f"ready: unconfigured, port '{self.params['port']}'"
             + (', autostart' if self.params['autostart'] else ''))
@@ -249,7 +262,10 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
             info = driver.open()
         except (ValueError, McuError) as err:
             self.problems.warn('configure', f'configure failed: {err}')
+            self._configure_error = str(err)
+            self.publish_status()  # on a change of the reason, and once a second
             return TransitionCallbackReturn.FAILURE
+        self._configure_error = None
         self.driver = driver
         self.supervisor = SafetySupervisor(config, info)
         self._make_entities(info)
@@ -291,6 +307,7 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
                                 'closed')
         self.release('error')
         self.lifecycle = 'unconfigured'
+        self.publish_status(force=True)
         return TransitionCallbackReturn.SUCCESS
 
     def destroy_node(self) -> None:
@@ -423,7 +440,7 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
                     supervisor.on_mcu_fault(fault)
                 supervisor.sent(driver.write(supervisor.output(
                     now, enabled=self.lifecycle == 'active')))
-                if now - self._last_heartbeat >= _HEARTBEAT_PERIOD_S:
+                if now - self._last_heartbeat >= HEARTBEAT_PERIOD_S:
                     self._last_heartbeat = now
                     driver.heartbeat()
         except (McuError, ValueError) as err:
@@ -471,17 +488,20 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
             else:
                 self.get_logger().info(event.message)
 
-    def current_status(self):
+    def current_status(self) -> HardwareStatus:
         supervisor = self.supervisor
-        if supervisor is None:
-            return None
+        if supervisor is None:  # no MCU: unconfigured (configure failing?) or finalized
+            error = self._configure_error
+            return HardwareStatus(
+                state=self.lifecycle, link='closed', motors='none', valves='none',
+                faults=('configure_failed',) if error else (), latched=(),
+                reason=f'configure failed: {error}' if error else f'{self.lifecycle}: no MCU',
+                safe_latency=None, clamped=0, rejected=0, bad_frames=0)
         link = 'lost' if supervisor.link_lost is not None else self.driver.state.value
         return supervisor.status(self.lifecycle, link, self.driver.stats.bad_frames)
 
     def publish_status(self, force: bool = False) -> None:
         status = self.current_status()
-        if status is None:
-            return
         now = time.monotonic()
         key = (status.state, status.link, status.motors, status.valves, status.faults,
                status.latched, status.reason, status.safe_latency)
@@ -492,9 +512,9 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
     def diagnostic_status(self) -> list[DiagnosticStatus]:
         status = self.current_status()
         diagnostic = DiagnosticStatus(name='hw_bridge: MCU link', hardware_id=self.params['port'])
-        if status is None:
+        if self.supervisor is None:
             diagnostic.level = WARN
-            diagnostic.message = f'{self.lifecycle}: no MCU'
+            diagnostic.message = status.reason
         else:
             faults = self.supervisor.faults
             safe = status.motors not in ('follow', 'none') or status.valves == 'safe'
