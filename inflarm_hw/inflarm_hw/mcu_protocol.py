@@ -46,6 +46,7 @@ N_MOTORS, N_CHAMBERS, N_LINKS = 3, 5, 2
 #: Pressure sensor channels, as numbered in FaultInject and Fault: chambers, then links.
 PRESSURE_CHANNELS = N_CHAMBERS + N_LINKS
 
+
 class MessageType(enum.IntEnum):
     """Message type byte of the header."""
 
