@@ -6,7 +6,8 @@ this process's environment (``scripts/env.sh``: the workers import ``inflarm_*``
 by default. Workers run without a nanny and with one thread, so a worker is one process: SIGKILL
 it and it is gone, as a machine that fails. `command` wraps each command line, e.g. in
 `netns_hosts.Host.command` to start them inside a network namespace. `stop` kills everything it
-started and waits for it; use it in a fixture's teardown.
+started and waits for it; use it in a fixture's teardown. `knowledge_build_command` is a
+knowledge build client as its own process, and `filled_points` reads how far a build got.
 """
 
 from collections.abc import Callable
@@ -18,6 +19,41 @@ import subprocess
 import sys
 
 START_TIMEOUT_S = 60.0
+
+
+def knowledge_build_command(path: Path, grid, address: str, n_trials: int,
+                            batch_size: int) -> list[str]:
+    """A knowledge build client as its own process: ``build_knowledge_database(path, grid,
+    scheduler=address)`` on ``inflarm-build-knowledge``'s plant, without a progress bar."""
+    code = (
+        'import sys\n'
+        'from inflarm_bringup.knowledge_cli import knowledge_plant\n'
+        'from inflarm_control.knowledge import KnowledgeGrid, build_knowledge_database\n'
+        f'grid = KnowledgeGrid({grid.origin}, {grid.spacing}, {grid.shape})\n'
+        'build_knowledge_database(sys.argv[1], grid, plant_factory=knowledge_plant,'
+        f' n_trials={n_trials}, batch_size={batch_size}, progress=False, scheduler=sys.argv[2])\n'
+        'print("built")\n'
+    )
+    return [sys.executable, '-c', code, str(path), address]
+
+
+def filled_points(path: Path) -> int:
+    """Knowledge points filled so far in the database at ``path``; 0 before its header is out."""
+    from inflarm_control.knowledge import KnowledgeDatabase
+
+    try:
+        with KnowledgeDatabase.open(path) as db:
+            return db.n_filled
+    except (OSError, ValueError):  # not there yet, or its header not written yet
+        return 0
+
+
+def wait_for_workers_command(address: str, n: int) -> list[str]:
+    """A process that exits 0 once ``n`` workers have joined the scheduler at ``address``."""
+    code = ('import sys\nfrom distributed import Client\n'
+            f'with Client(sys.argv[1], timeout={START_TIMEOUT_S}) as client:\n'
+            f'    client.wait_for_workers({n}, timeout={START_TIMEOUT_S})\n')
+    return [sys.executable, '-c', code, address]
 
 
 def free_port(host: str = '127.0.0.1') -> int:
@@ -58,13 +94,14 @@ class DaskCluster:
             '-m', 'distributed.cli.dask_scheduler', '--host', host, '--port', str(self.port),
             '--no-dashboard', '--no-show'])
 
-    def add_worker(self, host: str = '127.0.0.1',
-                   environment: dict[str, str] | None = None) -> subprocess.Popen:
-        """Start one worker (one process, one thread, no nanny) serving at ``host``."""
+    def add_worker(self, host: str = '127.0.0.1', environment: dict[str, str] | None = None,
+                   command: Callable[[list[str]], list[str]] | None = None) -> subprocess.Popen:
+        """Start one worker (one process, one thread, no nanny) serving at ``host``; ``command``
+        wraps its command line instead of the cluster's."""
         process = self._start(f'worker-{len(self.workers)}', [
             '-m', 'distributed.cli.dask_worker', self.address, '--host', host, '--nthreads', '1',
             '--no-nanny', '--no-dashboard', '--local-directory', str(self.directory)],
-            environment)
+            environment, command)
         self.workers.append(process)
         return process
 
@@ -86,11 +123,11 @@ class DaskCluster:
                 process.send_signal(signal.SIGKILL)
             process.wait(timeout=10)
 
-    def _start(self, name: str, args: list[str],
-               environment: dict[str, str] | None = None) -> subprocess.Popen:
+    def _start(self, name: str, args: list[str], environment: dict[str, str] | None = None,
+               command: Callable[[list[str]], list[str]] | None = None) -> subprocess.Popen:
         self.directory.mkdir(parents=True, exist_ok=True)
         with open(self.directory / f'{name}.log', 'wb') as log:
-            return subprocess.Popen(self.command([sys.executable, *args]), stdout=log,
+            return subprocess.Popen((command or self.command)([sys.executable, *args]), stdout=log,
                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                     env={**self.environment, **(environment or {})},
                                     cwd=self.directory)

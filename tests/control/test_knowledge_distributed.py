@@ -13,17 +13,16 @@ from pathlib import Path
 import shutil
 import signal
 import subprocess
-import sys
 
 import dask
-from dask_cluster import DaskCluster, free_port
+from dask_cluster import DaskCluster, filled_points, free_port, knowledge_build_command
+from distributed import Client  # before dask.config.set: it loads Dask's distributed defaults
 import pytest
 
 from inflarm_bringup.knowledge_cli import knowledge_plant
 import inflarm_control
 from inflarm_control.knowledge import (
     ClusterError,
-    KnowledgeDatabase,
     KnowledgeGrid,
     build_knowledge_database,
 )
@@ -59,14 +58,6 @@ def cluster(tmp_path):
         dask_cluster.stop()
 
 
-def n_filled(path: Path) -> int:
-    try:
-        with KnowledgeDatabase.open(path) as db:
-            return db.n_filled
-    except (OSError, ValueError):  # not there yet, or its header not written yet
-        return 0
-
-
 def test_local_build_in_this_process_writes_the_pools_bytes(tmp_path, local_bytes):
     path = tmp_path / 'knowledge.db'
     build_knowledge_database(path, GRID, workers=1, **BUILD).close()
@@ -82,8 +73,6 @@ def test_build_on_dask_writes_the_local_builds_bytes(tmp_path, cluster, local_by
 
 
 def test_a_worker_killed_mid_build_loses_only_its_block(tmp_path, cluster, local_bytes):
-    from distributed import Client
-
     path = tmp_path / 'knowledge.db'
     with Client(cluster.address, set_as_default=False) as observer, \
             concurrent.futures.ThreadPoolExecutor(1) as thread:
@@ -92,9 +81,9 @@ def test_a_worker_killed_mid_build_loses_only_its_block(tmp_path, cluster, local
         build = thread.submit(build_knowledge_database, path, GRID, scheduler=cluster.address,
                               **BUILD)
         # Once a block is in and while the victim learns another one, SIGKILL it.
-        assert wait_until(lambda: n_filled(path) >= 1 and observer.processing()[victim],
+        assert wait_until(lambda: filled_points(path) >= 1 and observer.processing()[victim],
                           BUILD_TIMEOUT_S) or build.done(), 'the victim never held a block'
-        done_before_kill = n_filled(path)
+        done_before_kill = filled_points(path)
         cluster.workers[0].send_signal(signal.SIGKILL)
         cluster.workers[0].wait(timeout=10)
         db = build.result(timeout=BUILD_TIMEOUT_S)
@@ -106,23 +95,15 @@ def test_a_worker_killed_mid_build_loses_only_its_block(tmp_path, cluster, local
 
 def test_a_build_whose_client_is_killed_resumes_on_dask(tmp_path, cluster, local_bytes):
     path = tmp_path / 'knowledge.db'
-    code = (
-        'import sys\n'
-        'from inflarm_bringup.knowledge_cli import knowledge_plant\n'
-        'from inflarm_control.knowledge import KnowledgeGrid, build_knowledge_database\n'
-        f'grid = KnowledgeGrid({GRID.origin}, {GRID.spacing}, {GRID.shape})\n'
-        f'build_knowledge_database(sys.argv[1], grid, plant_factory=knowledge_plant,'
-        f' n_trials={TRIALS}, batch_size={BLOCK}, progress=False, scheduler=sys.argv[2])\n'
-    )
-    client = subprocess.Popen([sys.executable, '-c', code, str(path), cluster.address])
+    client = subprocess.Popen(knowledge_build_command(path, GRID, cluster.address, TRIALS, BLOCK))
     try:
-        assert wait_until(lambda: n_filled(path) >= 2 or client.poll() is not None,
+        assert wait_until(lambda: filled_points(path) >= 2 or client.poll() is not None,
                           BUILD_TIMEOUT_S)
         client.send_signal(signal.SIGKILL)
     finally:
         client.kill()
         client.wait(timeout=10)
-    interrupted = n_filled(path)
+    interrupted = filled_points(path)
     assert 2 <= interrupted < GRID.size, 'the client finished before it was killed'
     assert interrupted % BLOCK == 0  # whole blocks only
     db = build_knowledge_database(path, GRID, scheduler=cluster.address, **BUILD)
@@ -136,7 +117,7 @@ def test_an_unreachable_scheduler_stops_the_build_naming_it(tmp_path, local_byte
     with dask.config.set({'distributed.comm.timeouts.connect': '2s'}), \
             pytest.raises(ClusterError, match=f'cannot reach the Dask scheduler at {address!r}'):
         build_knowledge_database(path, GRID, scheduler=address, **BUILD)
-    assert n_filled(path) == 0
+    assert filled_points(path) == 0
     build_knowledge_database(path, GRID, workers=2, **BUILD).close()  # resumable
     assert path.read_bytes() == local_bytes
 
@@ -158,7 +139,7 @@ def test_a_worker_of_another_version_is_refused(tmp_path, local_bytes):
         with pytest.raises(ClusterError, match=r"Dask workers \['tcp://127\.0\.0\.1:\d+'\] of"
                            r" .* run another version of .*inflarm_control"):
             build_knowledge_database(path, GRID, scheduler=dask_cluster.address, **BUILD)
-        assert n_filled(path) == 0
+        assert filled_points(path) == 0
     finally:
         dask_cluster.stop()
     build_knowledge_database(path, GRID, workers=2, **BUILD).close()  # resumable
