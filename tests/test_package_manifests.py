@@ -32,7 +32,7 @@ ROSDEP_KEYS = {
 }
 # PyPI-only modules with no rosdep key we could verify: installed from requirements.txt, named in
 # a comment of the package.xml instead of a key rosdep could not resolve.
-PYPI_ONLY = {'cobs', 'viser', 'websockets'}
+PYPI_ONLY = {'cobs', 'dask', 'distributed', 'viser', 'websockets'}
 # ROS packages whose Python module has the package's own name.
 ROS_PACKAGES = {
     'rclpy', 'ament_index_python', 'builtin_interfaces', 'std_msgs', 'std_srvs',
