@@ -3,8 +3,8 @@
 The distributed build writes the same bytes as the local one (in this process and on the local
 pool); a worker SIGKILLed mid-build loses only its block, which another worker learns again; a
 client killed mid-build leaves a file that a distributed build resumes to the same bytes. An
-unreachable scheduler, a worker of another version and a full disk stop the build with the
-reason, and the file stays resumable.
+unreachable scheduler, a worker of another version (there at the start, or joining mid-build)
+and a full disk stop the build with the reason, and the file stays resumable.
 """
 
 import concurrent.futures
@@ -122,18 +122,22 @@ def test_an_unreachable_scheduler_stops_the_build_naming_it(tmp_path, local_byte
     assert path.read_bytes() == local_bytes
 
 
-def test_a_worker_of_another_version_is_refused(tmp_path, local_bytes):
-    # A worker that imports a copy of inflarm_control with one line more in knowledge.py.
-    other = tmp_path / 'other'
+def other_version(directory: Path) -> dict[str, str]:
+    """Environment of a worker that imports a copy of inflarm_control with one line more in
+    knowledge.py."""
     package = Path(inflarm_control.__file__).parent
-    shutil.copytree(package, other / 'inflarm_control', ignore=shutil.ignore_patterns('*.pyc'))
-    with open(other / 'inflarm_control' / 'knowledge.py', 'a') as source:
+    shutil.copytree(package, directory / 'inflarm_control',
+                    ignore=shutil.ignore_patterns('*.pyc'))
+    with open(directory / 'inflarm_control' / 'knowledge.py', 'a') as source:
         source.write('\n# another version\n')
+    return {'PYTHONPATH': f"{directory}:{os.environ.get('PYTHONPATH', '')}"}
+
+
+def test_a_worker_of_another_version_is_refused(tmp_path, local_bytes):
     dask_cluster = DaskCluster(tmp_path / 'cluster')
     try:
         dask_cluster.add_worker()
-        dask_cluster.add_worker(environment={
-            'PYTHONPATH': f"{other}:{dask_cluster.environment.get('PYTHONPATH', '')}"})
+        dask_cluster.add_worker(environment=other_version(tmp_path / 'other'))
         dask_cluster.wait_for_workers(2)
         path = tmp_path / 'knowledge.db'
         with pytest.raises(ClusterError, match=r"Dask workers \['tcp://127\.0\.0\.1:\d+'\] of"
@@ -144,6 +148,28 @@ def test_a_worker_of_another_version_is_refused(tmp_path, local_bytes):
         dask_cluster.stop()
     build_knowledge_database(path, GRID, workers=2, **BUILD).close()  # resumable
     assert path.read_bytes() == local_bytes
+
+
+def test_a_worker_of_another_version_joining_mid_build_is_refused(tmp_path):
+    path = tmp_path / 'knowledge.db'
+    dask_cluster = DaskCluster(tmp_path / 'cluster')
+    try:
+        dask_cluster.add_worker()
+        dask_cluster.wait_for_workers(1)
+        with concurrent.futures.ThreadPoolExecutor(1) as thread:
+            # 30 trials: blocks of ~0.5 s, so the build outlasts the second worker's start.
+            build = thread.submit(build_knowledge_database, path, GRID,
+                                  scheduler=dask_cluster.address, **{**BUILD, 'n_trials': 30})
+            assert wait_until(lambda: filled_points(path) >= 1 or build.done(), BUILD_TIMEOUT_S)
+            dask_cluster.add_worker(environment=other_version(tmp_path / 'other'))
+            with pytest.raises(ClusterError, match=r'a block was learned on .* by another version'
+                               r' of .*inflarm_control'):
+                build.result(timeout=BUILD_TIMEOUT_S)
+    finally:
+        dask_cluster.stop()
+    assert 1 <= filled_points(path) < GRID.size
+    build_knowledge_database(path, GRID, workers=2, **{**BUILD, 'n_trials': 30}).close()
+    assert filled_points(path) == GRID.size  # resumable
 
 
 def test_a_full_disk_stops_the_build_and_the_file_resumes(tmp_path, local_bytes):
