@@ -1020,9 +1020,11 @@ def build_knowledge_database(
                 db.write(block.index, block.memory)
                 db.flush()
                 shown.update(len(block.index))
-    finally:
-        learned.close()
-        db.flush()
+    except BaseException:
+        learned.close()  # stops the pool or the cluster's futures first
+        db.close()  # every block written so far stays: the file resumes
+        raise
+    db.flush()
     return db
 
 
