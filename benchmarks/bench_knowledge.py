@@ -9,15 +9,20 @@ Prints, for the paper's full 67,200-point grid (a 32 MB file in a temporary dire
 - open time [ms] of the full file (target: the worst of 20 opens <= 50 ms), against
   ``np.fromfile`` reading it all;
 - with ``--full-build``: wall time of ``build_knowledge_database`` over all 67,200 points
-  (target <= 120 s on the 2-core machine; ~90 s).
+  (target <= 120 s on the 2-core machine; ~90 s);
+- in the full run (and with ``--distributed``): build speed [points/s] on a Dask cluster of 1 and
+  of 2 workers (``distributed.LocalCluster``, one process and one thread per worker, on this
+  machine) over 6,400 points (40 x 40 x 4) x 30 trials, against the local build in this process
+  and on the local pool of 2 processes; the files are checked byte-identical first.
 
 Passes over the same targets are timed round-robin (``common.interleaved``).
 
 Run: ``source scripts/env.sh && python benchmarks/bench_knowledge.py [--full-build]
-[--batch-size N] [--workers N]``
+[--batch-size N] [--workers N] [--distributed]``
 """
 
 import argparse
+import os
 from pathlib import Path
 import sys
 import tempfile
@@ -30,6 +35,7 @@ from inflarm_bringup.knowledge_cli import knowledge_plant
 from inflarm_control.knowledge import (
     DEFAULT_GRID,
     KnowledgeDatabase,
+    KnowledgeGrid,
     build_knowledge_database,
     nearest_knowledge_point,
 )
@@ -112,7 +118,40 @@ def bench_full_build(tmp: Path, batch_size: int | None, workers: int, progress: 
     return {'wall_s': wall, 'filled': filled, 'batch_size': batch_size, 'workers': workers}
 
 
-def rows(lookup: dict, build: dict | None) -> list[Row]:
+# 6,400 points of the default grid (its 4 lowest z values), in blocks of 800: 8 blocks, so two
+# workers share them evenly.
+SCALING_GRID = KnowledgeGrid(DEFAULT_GRID.origin, DEFAULT_GRID.spacing, (40, 40, 4))
+SCALING_BLOCK = 800
+
+
+def bench_distributed_build(tmp: Path) -> dict:
+    """Build speed [points/s] in this process, on the local pool of 2 and on Dask clusters of 1
+    and 2 workers, over `SCALING_GRID`, and the machine's load (1-min load average, the larger
+    of before and after); raises if a file differs from the local build's."""
+    from distributed import Client, LocalCluster
+
+    def build(name: str, **where) -> float:
+        path = tmp / f'{name}.db'
+        t0 = time.perf_counter()
+        build_knowledge_database(path, SCALING_GRID, plant_factory=knowledge_plant,
+                                 batch_size=SCALING_BLOCK, progress=False, **where).close()
+        speed = SCALING_GRID.size / (time.perf_counter() - t0)
+        if path.read_bytes() != (tmp / 'here.db').read_bytes():
+            raise AssertionError(f'the {name} build differs from the local one')
+        return speed
+
+    load = os.getloadavg()[0]
+    speeds = {'here': build('here', workers=1), 'pool 2': build('pool 2', workers=2)}
+    for n in (1, 2):
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                          dashboard_address=None) as cluster, Client(cluster) as client:
+            client.wait_for_workers(n)
+            client.run(knowledge_plant, 1)  # imports done before the clock starts
+            speeds[f'dask {n}'] = build(f'dask {n}', scheduler=cluster.scheduler_address)
+    return {**speeds, 'load': max(load, os.getloadavg()[0])}
+
+
+def rows(lookup: dict, build: dict | None, scaling: dict | None = None) -> list[Row]:
     """The summary rows."""
     grid = f"full grid, {DEFAULT_GRID.size} points, {lookup['size_mb']:.1f} MB"
     out = [
@@ -129,17 +168,29 @@ def rows(lookup: dict, build: dict | None) -> list[Row]:
         out.append(Row(f"build_knowledge_database, {build['filled']} points", build['wall_s'],
                        's', target=Target(at_most=BUILD_TARGET_S),
                        note=f"30 trials x 10 s each, {build['workers']} worker(s)"))
+    if scaling is not None:
+        note = (f'{SCALING_GRID.size} points x 30 trials, blocks of {SCALING_BLOCK}, workers on'
+                f" this 2-core machine at load {scaling['load']:.1f}; files byte-identical")
+        out += [
+            Row('knowledge build on Dask, 1 worker', scaling['dask 1'], 'pt/s',
+                'local build in one process', scaling['here'], note=note),
+            Row('knowledge build on Dask, 2 workers', scaling['dask 2'], 'pt/s',
+                'local pool of 2 processes', scaling['pool 2'], note=note),
+            Row('knowledge build on Dask, 2 workers', scaling['dask 2'], 'pt/s',
+                'Dask, 1 worker', scaling['dask 1'], note=note),
+        ]
     return out
 
 
 def run(quick: bool) -> list[Row]:
     """Rows of the summary table (--quick: fewer targets and rounds, no build; full: with the
-    full build, about 1.5 min)."""
+    full build and the Dask scaling, about 3 min)."""
     with tempfile.TemporaryDirectory() as tmp:
         if quick:
             return rows(bench_lookup_and_open(Path(tmp), 300, 30, 3, 5), None)
         lookup = bench_lookup_and_open(Path(tmp), 2000, 300, 5, 20)
-        return rows(lookup, bench_full_build(Path(tmp), None, 2, progress=False))
+        return rows(lookup, bench_full_build(Path(tmp), None, 2, progress=False),
+                    bench_distributed_build(Path(tmp)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,11 +198,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--full-build', action='store_true', help='time the 67,200-point build')
     parser.add_argument('--batch-size', type=int, default=None, help='arms simulated at once')
     parser.add_argument('--workers', type=int, default=2, help='build processes (2 cores)')
+    parser.add_argument('--distributed', action='store_true',
+                        help='build speed on Dask clusters of 1 and 2 workers (about 1 min)')
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         m = bench_lookup_and_open(Path(tmp), 2000, 300, 5, 20)
         build = (bench_full_build(Path(tmp), args.batch_size, args.workers, progress=True)
                  if args.full_build else None)
+        scaling = bench_distributed_build(Path(tmp)) if args.distributed else None
     print(f"full grid: {DEFAULT_GRID.size} points, file {m['size_mb']:.2f} MB")
     print(f"lookup (tuple)       {m['lookup']:8.2f} us   target <= {LOOKUP_TARGET_US:.0f} us")
     print(f"lookup (ndarray)     {m['lookup ndarray']:8.2f} us")
@@ -168,8 +222,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"full build           {build['wall_s']:8.1f} s    {build['filled']} points x 30 "
               f"trials x 10 s, batch {build['batch_size'] or 'default'}, {build['workers']} "
               f"worker(s)   target <= {BUILD_TARGET_S:.0f} s")
+    if scaling is not None:
+        for name, speed in scaling.items():
+            if name == 'load':
+                continue
+            print(f'build {name:14s} {speed:8.1f} points/s   {SCALING_GRID.size} points x 30'
+                  ' trials')
     print()
-    print_rows('knowledge', rows(m, build))
+    print_rows('knowledge', rows(m, build, scaling))
     return 0
 
 

@@ -61,12 +61,19 @@ limit), with a round-trip error of at most 7.5 Pa.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+import functools
+import hashlib
+import importlib.metadata
+import importlib.util
+import itertools
 import math
 import os
 from pathlib import Path
+import socket
 import struct
+import sys
 import zlib
 
 import numpy as np
@@ -80,9 +87,11 @@ __all__ = [
     'DEFAULT_SCALE_PA_PER_LSB',
     'HOME_POINT',
     'N_CHAMBERS',
+    'ClusterError',
     'KnowledgeDatabase',
     'KnowledgeGrid',
     'build_knowledge_database',
+    'code_fingerprint',
     'decode_pressure',
     'encode_pressure',
     'nearest_knowledge_point',
@@ -688,18 +697,34 @@ def holding_pressure(db: KnowledgeDatabase, point: npt.ArrayLike) -> npt.NDArray
     return weights @ db.read(index)[:, -1, :]  # KeyError where one holds no memory
 
 
+class ClusterError(RuntimeError):
+    """The Dask cluster cannot run a knowledge build: its scheduler is unreachable or has no
+    worker, a worker runs other code than the client, or a block was lost with every worker
+    that tried it. The file keeps every block written so far: fix the cause and resume."""
+
+
 @dataclass(frozen=True)
 class _BuildJob:
-    # Everything a (possibly forked) worker needs to learn one batch of knowledge points.
-    path: Path
+    # Everything a worker (forked, or a Dask worker on another machine) needs to learn a block.
     grid: KnowledgeGrid
     start: tuple[float, float, float]
     n_trials: int
     plant_factory: Callable[[int], object]
     controller_params: PidIlcParams
+    packages: tuple[str, ...]  # whose sources `code_fingerprint` hashes
 
 
-def _learn(job: _BuildJob, index: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+@dataclass(frozen=True)
+class _LearnedBlock:
+    index: npt.NDArray[np.int64]
+    memory: npt.NDArray[np.float64]  # (len(index), steps, 5) [Pa]
+    fingerprint: str  # `code_fingerprint` of the process that learned it
+    host: str
+
+
+def _learn_block(job: _BuildJob, index: npt.NDArray[np.int64]) -> _LearnedBlock:
+    # The one block computation, for this process, the local pool and Dask workers alike: its
+    # result depends on the job and the block's points only.
     plant = job.plant_factory(len(index))
     controller = PidIlcController(len(index), job.controller_params)
     rate_hz = job.controller_params.rate_hz
@@ -713,23 +738,124 @@ def _learn(job: _BuildJob, index: npt.NDArray[np.int64]) -> npt.NDArray[np.float
         dt=1.0 / rate_hz,
         keep_trajectories=False,
     )
-    return result.memory
+    fingerprint = code_fingerprint(job.packages)
+    return _LearnedBlock(index, result.memory, fingerprint, socket.gethostname())
 
 
-_WORKER: dict[str, object] = {}
+@functools.cache
+def code_fingerprint(packages: tuple[str, ...]) -> str:
+    """
+    Hash of the code a knowledge build runs, to refuse workers of another version.
+
+    Parameters
+    ----------
+    packages : tuple of str
+        Top-level packages (``('inflarm_control', 'inflarm_hw', ...)``); the sources (``*.py``)
+        of each, its distribution version, and the versions of Python and numpy are hashed.
+
+    Returns
+    -------
+    str
+        SHA-256 hex digest; a package that cannot be found here hashes as missing.
+    """
+    digest = hashlib.sha256(f'{sys.version_info[:2]} numpy {np.__version__}'.encode())
+    for name in sorted(packages):
+        spec = importlib.util.find_spec(name)
+        try:
+            version = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            version = 'unknown'
+        digest.update(f'\0{name} {version}'.encode())
+        if spec is None or not spec.submodule_search_locations:
+            digest.update(b' missing')
+            continue
+        for location in spec.submodule_search_locations:
+            for source in sorted(Path(location).rglob('*.py')):
+                digest.update(f'\0{source.relative_to(location)}\0'.encode())
+                digest.update(source.read_bytes())
+    return digest.hexdigest()
 
 
-def _worker_init(job: _BuildJob) -> None:
-    _WORKER['job'] = job
-    _WORKER['db'] = KnowledgeDatabase.open(job.path, mode='r+')
+def _blocks_here(job: _BuildJob, blocks: list) -> Iterator[_LearnedBlock]:
+    for index in blocks:
+        yield _learn_block(job, index)
 
 
-def _worker_batch(index: npt.NDArray[np.int64]) -> int:
-    # Workers write straight into the shared mapping: batches are disjoint.
-    db = _WORKER['db']
-    db.write(index, _learn(_WORKER['job'], index))
-    db.flush()
-    return len(index)
+_POOL_JOB: dict[str, _BuildJob] = {}
+
+
+def _set_pool_job(job: _BuildJob) -> None:
+    _POOL_JOB['job'] = job
+
+
+def _learn_pool_block(index: npt.NDArray[np.int64]) -> _LearnedBlock:
+    return _learn_block(_POOL_JOB['job'], index)
+
+
+def _blocks_on_pool(job: _BuildJob, blocks: list, workers: int) -> Iterator[_LearnedBlock]:
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    import multiprocessing
+
+    # Forked: the job (plant factory included) needs no pickling; workers start at the first
+    # submit, before the caller's progress bar starts its monitor thread.
+    pool = ProcessPoolExecutor(min(workers, len(blocks)), multiprocessing.get_context('fork'),
+                               _set_pool_job, (job,))
+    try:
+        futures = [pool.submit(_learn_pool_block, index) for index in blocks]
+        for future in as_completed(futures):
+            yield future.result()
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+def _blocks_on_dask(job: _BuildJob, blocks: list, scheduler: str,
+                    fingerprint: str) -> Iterator[_LearnedBlock]:
+    import dask
+    from distributed import Client, KilledWorker, as_completed
+
+    timeout = dask.config.get('distributed.comm.timeouts.connect')
+    try:
+        client = Client(scheduler, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as err:
+        raise ClusterError(
+            f'cannot reach the Dask scheduler at {scheduler!r} (connect timeout {timeout}): {err}'
+        ) from err
+    try:
+        try:
+            client.wait_for_workers(1, timeout=timeout)
+        except TimeoutError as err:
+            raise ClusterError(
+                f'no Dask worker joined the scheduler at {scheduler!r} within {timeout}'
+            ) from err
+        try:
+            found = client.run(code_fingerprint, job.packages)
+        except Exception as err:  # noqa: BLE001 - an older worker may not have the function
+            raise ClusterError(
+                f'the Dask workers of {scheduler!r} cannot run the version check of this'
+                f' inflarm_control, a worker of another version? ({type(err).__name__}: {err})'
+            ) from err
+        other = sorted(address for address, value in found.items() if value != fingerprint)
+        if other:
+            raise ClusterError(
+                f'Dask workers {other} of {scheduler!r} run another version of'
+                f' {", ".join(job.packages)} than this process (code fingerprint'
+                f' {found[other[0]][:12]} != {fingerprint[:12]}): update them and resume'
+            )
+        # pure=False: random keys, so two builds on one cluster never share a result.
+        futures = {client.submit(_learn_block, job, index, pure=False): index for index in blocks}
+        for future in as_completed(futures, loop=client.loop):
+            try:
+                block = future.result()
+            except KilledWorker as err:
+                index = futures[future]
+                raise ClusterError(
+                    f'the block of {len(index)} points from index {int(index[0])} was lost with'
+                    f' every Dask worker that ran it: {err}'
+                ) from err
+            future.release()
+            yield block
+    finally:
+        client.close()
 
 
 def build_knowledge_database(
@@ -743,6 +869,7 @@ def build_knowledge_database(
     controller_params: PidIlcParams | None = None,
     scale: float = DEFAULT_SCALE_PA_PER_LSB,
     workers: int | None = None,
+    scheduler: str | None = None,
     overwrite: bool = False,
     progress: bool = True,
 ) -> KnowledgeDatabase:
@@ -752,36 +879,52 @@ def build_knowledge_database(
     For each point the task ``start -> point`` is repeated ``n_trials`` times with the PID +
     iterative learning controller (each trial feeding the next, eqs. (1), (3), (4)), and the
     chamber outputs of the first ``memory_steps`` steps of the last trial are stored. Points are
-    run ``batch_size`` arms at a time (the plant is vectorized over arms), optionally in several
-    processes. An existing file is resumed: only points not yet filled are learned, so an
-    interrupted build can be restarted.
+    learned in blocks of ``batch_size`` consecutive flat indices (the plant is vectorized over
+    the arms of a block), in this process, in a local pool of processes, or on a Dask cluster;
+    the executor of the blocks is the only difference. This process alone writes the file, a
+    block at a time (its memories, then its filled marks). An existing file is resumed: only
+    points not yet filled are learned, so an interrupted build can be restarted.
+
+    The blocks are fixed by the grid (block ``k`` holds indices ``k * batch_size`` to
+    ``(k + 1) * batch_size - 1``, less those already filled), and a block's memories depend
+    only on the job and its points, not on where or when it ran: a build, resumed or not, local
+    or distributed, writes the same bytes as any other with the same arguments (for a plant
+    factory that is itself deterministic, such as ``inflarm-build-knowledge``'s noise-free one).
 
     Parameters
     ----------
     path : str or os.PathLike
-        Database file; created if missing, resumed if present (unless ``overwrite``).
+        Database file; created if missing, resumed if present (unless ``overwrite``). Its full
+        size is reserved before anything is learned.
     grid : KnowledgeGrid, optional
         Knowledge points; the paper's 67,200 by default.
     n_trials : int, optional
         Learning trials per point (30 in the paper).
     batch_size : int, optional
-        Arms simulated together; a few thousand keeps the arrays in cache.
+        Points per block; a few thousand keeps the arrays in cache, fewer spread a small grid
+        over more workers.
     start : array-like, shape (3,), optional
         Start point of every trial [m, sra_mount]; the paper's (0, 0, 0.604) m.
     plant_factory : callable
         ``plant_factory(n)`` makes a plant of ``n`` arms with ``reset()``, ``step(command,
         dt)`` and ``measure()`` (see ``inflarm_control.pid_ilc.run_trials``), e.g. the simulated
         ``inflarm_hw.sra_plant.SoftArmPlant``. The plant comes from outside: this package does
-        not depend on any hardware or simulator.
+        not depend on any hardware or simulator. With a ``scheduler`` it is pickled to the
+        workers (by reference when importable there, as ``inflarm-build-knowledge``'s is).
     controller_params : PidIlcParams, optional
         Controller gains; its defaults if None. Its ``memory_steps`` and ``rate_hz`` become the
         database's ``steps`` and ``rate_hz`` (10 s at 5 Hz by default).
     scale : float, optional
         Pressure per stored LSB [Pa]; must cover the controller's ``p_max``.
     workers : int, optional
-        Processes learning batches in parallel, forked (POSIX only) and writing disjoint points;
-        one per CPU by default, 1 learns in this process. The full grid takes ~85 s with 2
-        workers on 2 cores, ~170 s with 1 (the plant's substeps dominate).
+        Without a ``scheduler``: processes learning blocks in parallel, forked (POSIX only);
+        one per CPU by default, 1 learns in this process. Must be None with a ``scheduler``.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler (``'tcp://HOST:8786'``) whose workers learn the
+        blocks; None for the local pool. The connection times out after Dask's
+        ``distributed.comm.timeouts.connect`` (30 s unless configured). Workers must run the
+        same code as this process (`code_fingerprint` of every loaded ``inflarm*`` package);
+        a worker that dies loses only the block it was learning, which Dask reruns elsewhere.
     overwrite : bool, optional
         Start from an empty file even if ``path`` exists.
     progress : bool, optional
@@ -797,7 +940,19 @@ def build_knowledge_database(
     ValueError
         On bad arguments, a scale too coarse for the controller's ``p_max``, or an existing file
         whose grid, steps, rate or scale differ from the requested ones.
+    OSError
+        If the file cannot be created, or its size reserved (``ENOSPC``: the disk is full).
+    ClusterError
+        If the scheduler cannot be reached or has no worker, a worker runs another version, or
+        a block was lost with every worker that tried it.
     """
+    if scheduler is not None:
+        if not isinstance(scheduler, str) or not scheduler:
+            raise ValueError(f"expected scheduler an address like 'tcp://HOST:8786', got"
+                             f' {scheduler!r}')
+        if workers is not None:
+            raise ValueError(f"expected workers=None with a scheduler (the cluster's workers"
+                             f' learn the blocks), got workers={workers!r}')
     workers = (os.cpu_count() or 1) if workers is None else workers
     for name, value in (('n_trials', n_trials), ('batch_size', batch_size), ('workers', workers)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
@@ -814,6 +969,8 @@ def build_knowledge_database(
             f'expected scale >= {max(params.p_max) / _CODE_MAX:.3f} Pa per LSB to store the'
             f' controller p_max of {max(params.p_max):.0f} Pa, got {scale!r}'
         )
+    if not callable(plant_factory):
+        raise ValueError(f'expected plant_factory to be callable, got {plant_factory!r}')
     path = Path(path)
     if path.exists() and not overwrite:
         db = KnowledgeDatabase.open(path, mode='r+')
@@ -827,35 +984,60 @@ def build_knowledge_database(
             )
     else:
         db = KnowledgeDatabase.create(path, grid, steps, rate_hz, scale, overwrite=True)
+    try:
+        _reserve(path)
+    except OSError:
+        db.close()
+        raise
     todo = np.flatnonzero(db._mask == 0)
-    batches = [todo[i : i + batch_size] for i in range(0, len(todo), batch_size)]
-    if not callable(plant_factory):
-        raise ValueError(f'expected plant_factory to be callable, got {plant_factory!r}')
-    job = _BuildJob(path, grid, start, int(n_trials), plant_factory, params)
+    # Blocks fixed by the grid, so a resumed build learns the same blocks as an uninterrupted one.
+    blocks = [b for b in np.split(todo, np.flatnonzero(np.diff(todo // batch_size)) + 1) if b.size]
+    packages = tuple(sorted({name.partition('.')[0] for name in sys.modules
+                             if name.startswith('inflarm')}))
+    job = _BuildJob(grid, start, int(n_trials), plant_factory, params, packages)
+    fingerprint = code_fingerprint(packages)
+    if scheduler is not None:
+        learned = _blocks_on_dask(job, blocks, scheduler, fingerprint)
+    elif workers == 1 or len(blocks) < 2:
+        learned = _blocks_here(job, blocks)
+    else:
+        learned = _blocks_on_pool(job, blocks, workers)
 
     from tqdm import tqdm
 
-    def bar() -> tqdm:
-        return tqdm(total=len(todo), unit='pt', desc='knowledge points', disable=not progress)
-
-    if workers == 1 or len(batches) < 2:
-        with bar() as shown:
-            for index in batches:
-                db.write(index, _learn(job, index))
-                shown.update(len(index))
-    else:
-        import multiprocessing
-
-        db.flush()
-        # Fork the pool before tqdm starts its monitor thread.
-        pool = multiprocessing.get_context('fork').Pool(
-            min(workers, len(batches)), _worker_init, (job,)
-        )
-        with pool, bar() as shown:
-            for done in pool.imap_unordered(_worker_batch, batches):
-                shown.update(done)
+    try:
+        # The first block is asked for before tqdm starts its monitor thread (the pool forks).
+        first = next(learned, None)
+        with tqdm(total=len(todo), unit='pt', desc='knowledge points',
+                  disable=not progress) as shown:
+            for block in itertools.chain([] if first is None else [first], learned):
+                if block.fingerprint != fingerprint:
+                    raise ClusterError(
+                        f'a block was learned on {block.host} by another version of'
+                        f' {", ".join(packages)} (code fingerprint {block.fingerprint[:12]} !='
+                        f' {fingerprint[:12]}): update that worker and resume'
+                    )
+                db.write(block.index, block.memory)
+                db.flush()
+                shown.update(len(block.index))
+    except BaseException:
+        learned.close()  # stops the pool or the cluster's futures first
+        db.close()  # every block written so far stays: the file resumes
+        raise
     db.flush()
     return db
+
+
+def _reserve(path: Path) -> None:
+    # Allocate the whole file now: a full disk then stops the build here with ENOSPC, not later
+    # with a SIGBUS in the writer on a page of a sparse file. Allocating keeps the bytes.
+    size = path.stat().st_size
+    with open(path, 'r+b') as f:
+        try:
+            os.posix_fallocate(f.fileno(), 0, size)
+        except OSError as err:
+            raise OSError(err.errno, f'cannot reserve the {size} B of the knowledge database'
+                          f' {str(path)!r}: {err.strerror}') from err
 
 
 def encode_pressure(pressure: npt.ArrayLike, scale: float) -> npt.NDArray[np.uint16]:

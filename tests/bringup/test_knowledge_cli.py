@@ -18,3 +18,21 @@ def test_builds_a_database_for_every_knowledge_point(tmp_path, capsys):
 def test_an_unwritable_output_fails_with_a_message(tmp_path, capsys):
     assert main([str(tmp_path / 'missing' / 'knowledge.db'), '--trials', '1']) == 1
     assert 'inflarm-build-knowledge:' in capsys.readouterr().err
+
+
+def test_an_unreachable_scheduler_exits_2_naming_it(tmp_path, capsys):
+    import dask
+    from dask_cluster import free_port
+    import distributed  # noqa: F401 - loads its config defaults before dask.config.set
+
+    address = f'tcp://127.0.0.1:{free_port()}'
+    with dask.config.set({'distributed.comm.timeouts.connect': '1s'}):
+        assert main([str(tmp_path / 'knowledge.db'), '--scheduler', address]) == 2
+    err = capsys.readouterr().err
+    assert f'inflarm-build-knowledge: cannot reach the Dask scheduler at {address!r}' in err
+
+
+def test_workers_and_a_scheduler_together_are_refused(tmp_path, capsys):
+    assert main([str(tmp_path / 'knowledge.db'), '--scheduler', 'tcp://127.0.0.1:8786',
+                 '--workers', '2']) == 1
+    assert 'expected workers=None with a scheduler' in capsys.readouterr().err

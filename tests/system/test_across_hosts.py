@@ -7,7 +7,9 @@ with the other's address in ``ROS_STATIC_PEERS``, over UDP only: the tests' Fast
 without its shared memory, which would join the namespaces past the link (``netns_hosts``). A PID
 trial across the link moves the ball toward the target, its report arrives on host B, and the
 chamber pressures on host A follow host B's commands. With ``LOCALHOST`` instead of ``SUBNET``
-(no multicast at all), the static peer alone finds the other host.
+(no multicast at all), the static peer alone finds the other host. The knowledge build runs on
+a Dask cluster split the same way (scheduler and client on host A, two workers on host B, one
+SIGKILLed mid-build) and writes the bytes of the local build.
 
 The tests that need namespaces are skipped, with the failing command and its error, where they
 cannot be created (no root, no CAP_NET_ADMIN, no ``ip``); the rest check the helpers without
@@ -19,10 +21,18 @@ import signal
 import subprocess
 import xml.etree.ElementTree as ET
 
+from dask_cluster import (
+    DaskCluster,
+    filled_points,
+    knowledge_build_command,
+    wait_for_workers_command,
+)
 import numpy as np
 import pytest
 
+from inflarm_bringup.knowledge_cli import knowledge_plant
 from inflarm_bringup.processes import NodeProcess, config_path
+from inflarm_control.knowledge import KnowledgeGrid, build_knowledge_database
 from inflarm_hw.valve import valve_output
 from inflarm_model.soft_arm import CHAMBERS
 from inflarm_msgs_json import ChamberPressures, PressureCommand, TrialReport, decode
@@ -289,3 +299,46 @@ def test_link_addresses_and_names_are_checked():
     for bad in ('', '-a', 'a/b', 'x' * 65):
         with pytest.raises(ValueError, match='expected namespace a name'):
             check_namespace_name(bad)
+
+
+# --- the knowledge build on a Dask cluster across the hosts ---------------------------------
+
+KNOWLEDGE_GRID = KnowledgeGrid(origin=(0.05, 0.06, 0.70), spacing=0.01, shape=(4, 4, 6))
+KNOWLEDGE_TRIALS, KNOWLEDGE_BLOCK = 10, 8
+DASK_PORT = 8786  # free: nothing else runs in a new namespace
+
+
+@pytest.mark.system
+def test_a_knowledge_build_on_workers_across_the_link_writes_the_local_bytes(hosts, tmp_path):
+    host_a, host_b = hosts
+    local = tmp_path / 'local.db'
+    build_knowledge_database(local, KNOWLEDGE_GRID, plant_factory=knowledge_plant,
+                             n_trials=KNOWLEDGE_TRIALS, batch_size=KNOWLEDGE_BLOCK, workers=2,
+                             progress=False).close()
+    # The scheduler and the client on host A, two workers on host B: every block crosses the link.
+    cluster = DaskCluster(tmp_path / 'cluster', host=host_a.address, port=DASK_PORT,
+                          command=host_a.command)
+    path = tmp_path / 'distributed.db'
+    try:
+        for _ in range(2):
+            cluster.add_worker(host=host_b.address, command=host_b.command)
+        subprocess.run(host_a.command(wait_for_workers_command(cluster.address, 2)), check=True,
+                       timeout=120)
+        before = host_a.link_counters()
+        client = subprocess.Popen(host_a.command(knowledge_build_command(
+            path, KNOWLEDGE_GRID, cluster.address, KNOWLEDGE_TRIALS, KNOWLEDGE_BLOCK)),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # One worker dies mid-build: only its block is learned again, by the other.
+        assert wait_until(lambda: filled_points(path) >= 1 or client.poll() is not None, 120)
+        done_before_kill = filled_points(path)
+        cluster.workers[0].send_signal(signal.SIGKILL)
+        out, err = client.communicate(timeout=120)
+        assert client.returncode == 0, err
+        assert 'built' in out
+    finally:
+        cluster.stop()
+    assert done_before_kill < KNOWLEDGE_GRID.size, 'the build finished before the kill'
+    assert path.read_bytes() == local.read_bytes()
+    # The memories came over the link: 96 points x 50 steps x 5 chambers x 8 B.
+    received = host_a.link_counters().rx_bytes - before.rx_bytes
+    assert received > KNOWLEDGE_GRID.size * 50 * 5 * 8, received
