@@ -38,21 +38,12 @@ from inflarm_hw.bag import bag_info, deserialize, normalize_topic, read_messages
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import MEAN_STIFFNESS
 from inflarm_model.urdf import DEFAULT_LINK_LENGTH, DEFAULT_SPRING_OFFSET
+from inflarm_msgs_json.cli import positive_float
 
 PROG = 'inflarm-estimate-bag'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 CSV_HEADER = ('time_s', 'force_x_n', 'force_y_n', 'force_z_n', 'q_k1_rad', 'q_k2_rad',
               'q_k3_rad', 'q_k4_rad', 'tip_x_m', 'tip_y_m', 'tip_z_m', 'converged')
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f'expected a positive finite number, got {text!r}')
-    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,12 +57,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', required=True, metavar='CSV', help='CSV file to write')
     parser.add_argument('--topic', default='joint_states',
                         help='sensor_msgs/JointState topic (default: %(default)s)')
-    parser.add_argument('--stiffness', type=_positive_float, nargs='+', default=[MEAN_STIFFNESS],
+    parser.add_argument('--stiffness', type=positive_float, nargs='+', default=[MEAN_STIFFNESS],
                         metavar='K', help='spring stiffness [N m/rad], one for all four springs '
                                           'or four values (default: %(default)s)')
-    parser.add_argument('--link-length', type=_positive_float, default=DEFAULT_LINK_LENGTH,
+    parser.add_argument('--link-length', type=positive_float, default=DEFAULT_LINK_LENGTH,
                         help='inflatable link length L [m] (default: %(default)s)')
-    parser.add_argument('--spring-offset', type=_positive_float, default=DEFAULT_SPRING_OFFSET,
+    parser.add_argument('--spring-offset', type=positive_float, default=DEFAULT_SPRING_OFFSET,
                         help='virtual spring offset l1 [m] (default: %(default)s)')
     return parser
 

@@ -14,7 +14,6 @@ a test rig. Exit status: 0 on success, 1 on a bad or unreadable input file, 2 on
 
 import argparse
 from collections.abc import Sequence
-import math
 import os
 import sys
 
@@ -32,19 +31,10 @@ from inflarm_model.characterization import (
     write_samples_csv,
 )
 from inflarm_model.link import LINK_RADIUS
+from inflarm_msgs_json.cli import positive_float
 
 PROG = 'inflarm-characterize'
 DEFAULT_SEED = 7
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f'expected a positive finite number, got {text!r}')
-    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -63,9 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='write synthetic samples consistent with Table 3 to SAMPLES first')
     parser.add_argument('--seed', type=int, default=None,
                         help=f'seed of the synthetic samples (default: {DEFAULT_SEED})')
-    parser.add_argument('--radius', type=_positive_float, default=LINK_RADIUS,
+    parser.add_argument('--radius', type=positive_float, default=LINK_RADIUS,
                         help='link radius r [m] for the wrinkling moment (default: %(default)s)')
-    parser.add_argument('--pressure-step', type=_positive_float, default=DEFAULT_PRESSURE_STEP,
+    parser.add_argument('--pressure-step', type=positive_float, default=DEFAULT_PRESSURE_STEP,
                         help='resolution used to group samples by pressure [Pa] '
                              '(default: %(default)s)')
     return parser

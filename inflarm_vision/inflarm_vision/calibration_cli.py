@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 
 from inflarm_model.camera import PinholeCamera, look_at
+from inflarm_msgs_json.cli import positive_float
 from inflarm_vision.calibration import (
     CameraIntrinsics,
     CheckerboardRenderer,
@@ -74,16 +75,6 @@ class _InputError(Exception):
     """Bad input: the message goes to stderr, the exit status is 2."""
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f'expected a positive finite number, got {text!r}')
-    return value
-
-
 def _board(text: str) -> tuple[int, int]:
     match = re.fullmatch(r'\s*(\d+)\s*[xX]\s*(\d+)\s*', text)
     if not match:
@@ -105,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     intr.add_argument('--board', type=_board, required=True, metavar='COLSxROWS',
                       help='inner corners of the board along x across, e.g. 9x6 for a board '
                            'of 10 x 7 squares')
-    intr.add_argument('--square-m', type=_positive_float, required=True,
+    intr.add_argument('--square-m', type=positive_float, required=True,
                       help='side of a square [m]')
     intr.add_argument('--out', required=True, metavar='YAML',
                       help='calibration file to write (camera_calibration_parsers format)')
@@ -123,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the camera's intrinsics (from the intrinsics command)")
     extr.add_argument('--out', required=True, metavar='YAML',
                       help='ball_tracker parameters file to write')
-    extr.add_argument('--ball-diameter-m', type=_positive_float, default=0.04,
+    extr.add_argument('--ball-diameter-m', type=positive_float, default=0.04,
                       help='diameter of the ball [m] (default: 0.04)')
 
     synth = sub.add_parser('synthetic', help='write a synthetic example to try the commands on')
