@@ -12,7 +12,8 @@ a seed.
 Image formation, in linear grey levels (0-255 at exposure 1, no gamma)::
 
     coverage c(pixel)   fraction of the pixel whose rays hit the sphere (16 x 16 sub-pixel
-                        rays tested against the tangent cone, distortion included)
+                        rays tested against the tangent cone, distortion included:
+                        `inflarm_model.camera.sphere_coverage`)
     colour              background (1 - c) + c (albedo shade + 255 specular)
     image               clip(exposure * blur(colour) + noise, 0, 255), rounded to uint8
 
@@ -33,8 +34,8 @@ from inflarm_model.camera import (
     PinholeCamera,
     RigidTransform,
     SphereImage,
+    sphere_coverage,
     sphere_image,
-    undistort_pixels,
 )
 
 __all__ = [
@@ -383,66 +384,16 @@ class SyntheticCamera:
         return SyntheticFrame(image=image, truth=truth)
 
     def _draw_ball(self, colour: npt.NDArray[np.float32], truth: BallTruth) -> None:
-        cam = self.camera
-        outline = truth.image.outline
-        u0 = max(int(math.floor(outline[:, 0].min())) - 1, 0)
-        v0 = max(int(math.floor(outline[:, 1].min())) - 1, 0)
-        u1 = min(int(math.ceil(outline[:, 0].max())) + 2, cam.width)
-        v1 = min(int(math.ceil(outline[:, 1].max())) + 2, cam.height)
-        if u1 <= u0 or v1 <= v0:
-            return  # entirely outside the image
-        # undistorted coordinates of the pixel centres of the ROI and a ring of one around it
-        uu, vv = np.meshgrid(np.arange(u0 - 1, u1 + 1, dtype=float),
-                             np.arange(v0 - 1, v1 + 1, dtype=float))
-        grid = undistort_pixels(cam, np.stack([uu, vv], axis=-1))
         center = truth.position_camera
-        coverage = self._coverage(grid, center)
-        if not coverage.any():
-            return
-        rays = np.concatenate([grid[1:-1, 1:-1], np.ones((v1 - v0, u1 - u0, 1))], axis=-1)
+        covered = sphere_coverage(self.camera, center, self.ball_radius, _SUPERSAMPLING)
+        if covered is None or not covered.coverage.any():
+            return  # entirely outside the image
+        h, w = covered.coverage.shape
+        rays = np.concatenate([covered.undistorted, np.ones((h, w, 1))], axis=-1)
         rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
         ball = self._shade(rays, center)
-        roi = colour[v0:v1, u0:u1]
-        roi += coverage[:, :, None] * (ball - roi)
-
-    def _coverage(self, grid: npt.NDArray[np.float64],
-                  center: npt.NDArray[np.float64]) -> npt.NDArray[np.float32]:
-        """Fraction of each pixel whose rays hit the sphere.
-
-        ``grid``, shape (h + 2, w + 2, 2): undistorted coordinates of the ROI's pixel centres
-        and a ring of one pixel around them. Pixels more than 2 px (in angle) inside or outside
-        the outline are full or empty; in the others the ray through each of 16 x 16 sub-pixel
-        centres is tested against the sphere's tangent cone, ``(ray . c)^2 >= (|c|^2 - R^2)
-        |ray|^2`` for ``ray = (x, y, 1)``, with ``(x, y)`` interpolated bilinearly between
-        pixel centres (the distortion is smooth: within 1e-4 px).
-        """
-        s = _SUPERSAMPLING
-        distance = float(np.linalg.norm(center))
-        cos2 = distance * distance - self.ball_radius ** 2
-        half_angle = math.asin(self.ball_radius / distance)
-        inner = grid[1:-1, 1:-1]
-        dot = inner[..., 0] * center[0] + inner[..., 1] * center[1] + center[2]
-        norm = np.sqrt(inner[..., 0] ** 2 + inner[..., 1] ** 2 + 1.0) * distance
-        angle = np.arccos(np.clip(dot / norm, -1.0, 1.0))
-        tolerance = 1.0 / self.camera.focal_px
-        coverage = (angle < half_angle - tolerance).astype(np.float32)
-        rows, cols = np.nonzero(np.abs(angle - half_angle) <= tolerance)
-        if len(rows) == 0:
-            return coverage
-        # bilinear interpolation of the 3 x 3 grid nodes around each pixel (pixel (r, c) is
-        # node (r + 1, c + 1)) at its sub-pixel centres: the weights are the same for every
-        # pixel, one (s, 3) matrix per axis
-        offsets = (np.arange(s) + 0.5) / s - 0.5
-        weights = np.stack([np.maximum(-offsets, 0.0), 1.0 - np.abs(offsets),
-                            np.maximum(offsets, 0.0)], axis=1)
-        around = np.stack([grid[rows + dr, cols + dc] for dr in range(3) for dc in range(3)],
-                          axis=1).reshape(len(rows), 3, 3, 2)
-        xy = np.einsum('ia,jb,pabk->pijk', weights, weights, around, optimize=True)
-        x, y = xy[..., 0], xy[..., 1]
-        d = x * center[0] + y * center[1] + center[2]
-        hit = (d > 0.0) & (d * d >= cos2 * (x * x + y * y + 1.0))
-        coverage[rows, cols] = hit.mean(axis=(1, 2))
-        return coverage
+        roi = colour[covered.v0:covered.v0 + h, covered.u0:covered.u0 + w]
+        roi += covered.coverage[:, :, None] * (ball - roi)
 
     def _shade(self, rays: npt.NDArray[np.float64],
                center: npt.NDArray[np.float64]) -> npt.NDArray[np.float32]:

@@ -36,11 +36,13 @@ __all__ = [
     'DISTORTION_MODELS',
     'PinholeCamera',
     'RigidTransform',
+    'SphereCoverage',
     'SphereImage',
     'cone_rays',
     'look_at',
     'pixel_rays',
     'project_points',
+    'sphere_coverage',
     'sphere_image',
     'undistort_pixels',
 ]
@@ -409,3 +411,65 @@ def sphere_image(camera: PinholeCamera, center: npt.ArrayLike, radius: float,
     centroid = np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
     return SphereImage(outline=outline, center=centroid, radius=math.sqrt(abs(area) / math.pi),
                        projected_center=project_points(camera, center))
+
+
+@dataclass(frozen=True)
+class SphereCoverage:
+    """The pixels a sphere's image covers: ``coverage[v - v0, u - u0]`` is the fraction of pixel
+    ``(u, v)`` whose rays hit the sphere, for ``u0 <= u < u0 + width``, ``v0 <= v < v0 +
+    height`` (a region of the image around the outline; all pixels outside it are 0)."""
+
+    u0: int
+    v0: int
+    coverage: npt.NDArray[np.float32]
+    undistorted: npt.NDArray[np.float64]  # (height, width, 2): normalized (x, y) of the centres
+
+
+def sphere_coverage(camera: PinholeCamera, center: npt.ArrayLike, radius: float,
+                    supersample: int = 16) -> SphereCoverage | None:
+    """Anti-aliased coverage of a sphere's image, distortion included; None if it lies outside
+    the image.
+
+    Pixels more than one pixel (in angle) inside or outside the outline are full or empty; in
+    the others the ray through each of ``supersample`` x ``supersample`` sub-pixel centres is
+    tested against the sphere's tangent cone, ``(ray . c)^2 >= (|c|^2 - R^2) |ray|^2`` for
+    ``ray = (x, y, 1)``, with ``(x, y)`` interpolated bilinearly between the undistorted pixel
+    centres (the distortion is smooth: within 1e-4 px).
+    """
+    c = np.asarray(center, dtype=float)
+    outline = sphere_image(camera, c, radius).outline
+    u0 = max(int(math.floor(outline[:, 0].min())) - 1, 0)
+    v0 = max(int(math.floor(outline[:, 1].min())) - 1, 0)
+    u1 = min(int(math.ceil(outline[:, 0].max())) + 2, camera.width)
+    v1 = min(int(math.ceil(outline[:, 1].max())) + 2, camera.height)
+    if u1 <= u0 or v1 <= v0:
+        return None
+    # undistorted coordinates of the region's pixel centres and a ring of one around them
+    uu, vv = np.meshgrid(np.arange(u0 - 1, u1 + 1, dtype=float),
+                         np.arange(v0 - 1, v1 + 1, dtype=float))
+    grid = undistort_pixels(camera, np.stack([uu, vv], axis=-1))
+    distance = float(np.linalg.norm(c))
+    cos2 = distance * distance - radius ** 2
+    half_angle = math.asin(radius / distance)
+    inner = grid[1:-1, 1:-1]
+    dot = inner[..., 0] * c[0] + inner[..., 1] * c[1] + c[2]
+    norm = np.sqrt(inner[..., 0] ** 2 + inner[..., 1] ** 2 + 1.0) * distance
+    angle = np.arccos(np.clip(dot / norm, -1.0, 1.0))
+    tolerance = 1.0 / camera.focal_px
+    coverage = (angle < half_angle - tolerance).astype(np.float32)
+    rows, cols = np.nonzero(np.abs(angle - half_angle) <= tolerance)
+    if len(rows):
+        # bilinear interpolation of the 3 x 3 grid nodes around each pixel (pixel (r, c) is
+        # node (r + 1, c + 1)) at its sub-pixel centres: the weights are the same for every
+        # pixel, one (s, 3) matrix per axis
+        offsets = (np.arange(supersample) + 0.5) / supersample - 0.5
+        weights = np.stack([np.maximum(-offsets, 0.0), 1.0 - np.abs(offsets),
+                            np.maximum(offsets, 0.0)], axis=1)
+        around = np.stack([grid[rows + dr, cols + dc] for dr in range(3) for dc in range(3)],
+                          axis=1).reshape(len(rows), 3, 3, 2)
+        xy = np.einsum('ia,jb,pabk->pijk', weights, weights, around, optimize=True)
+        x, y = xy[..., 0], xy[..., 1]
+        d = x * c[0] + y * c[1] + c[2]
+        hit = (d > 0.0) & (d * d >= cos2 * (x * x + y * y + 1.0))
+        coverage[rows, cols] = hit.mean(axis=(1, 2))
+    return SphereCoverage(u0=u0, v0=v0, coverage=coverage, undistorted=inner)

@@ -23,7 +23,8 @@ checkerboard and of a flat-shaded ball through a `PinholeCamera`, distortion inc
 tests and for the example of ``inflarm-calibrate-camera synthetic``. Every pixel is the mean of
 ``supersample x supersample`` sub-pixel samples (the pixel's area, as a sensor integrates), each
 sample's ray undistorted (`inflarm_model.camera.pixel_rays`): the board by intersecting the ray
-with the board's plane, the ball by testing the ray against the cone the ball subtends.
+with the board's plane, the ball by testing the ray against the cone the ball subtends (the
+simulated camera's coverage, `inflarm_model.camera.sphere_coverage`).
 """
 
 from collections.abc import Sequence
@@ -42,9 +43,8 @@ from inflarm_model.camera import (
     DISTORTION_MODELS,
     PinholeCamera,
     RigidTransform,
-    pixel_rays,
     project_points,
-    sphere_image,
+    sphere_coverage,
     undistort_pixels,
 )
 from inflarm_vision import geometry
@@ -817,23 +817,15 @@ def render_ball(camera: PinholeCamera, center: npt.ArrayLike, radius_m: float,
     Returns
     -------
     image : ndarray, shape (height, width, 3), uint8
-        The fraction of each pixel's samples whose ray (`inflarm_model.camera.pixel_rays`)
-        lies inside the cone the ball subtends.
+        Ball and background mixed by the fraction of each pixel the ball covers
+        (`inflarm_model.camera.sphere_coverage`, ``supersample`` rays a side near the
+        outline).
     """
-    s = _check_supersample(supersample)
-    c = np.asarray(center, dtype=float)
-    outline = sphere_image(camera, c, radius_m).outline
-    cos_a = math.sqrt(1.0 - (radius_m / np.linalg.norm(c)) ** 2)
-    axis = c / np.linalg.norm(c)
-    # a sample is on the ball if its ray lies inside the cone the ball subtends
-    u0, v0 = np.maximum(np.floor(outline.min(axis=0)).astype(int) - 2, 0)
-    u1 = min(int(np.ceil(outline[:, 0].max())) + 3, camera.width)
-    v1 = min(int(np.ceil(outline[:, 1].max())) + 3, camera.height)
     coverage = np.zeros((camera.height, camera.width, 1))
-    if u0 < u1 and v0 < v1:
-        grid = _subpixel_grid(u1 - u0, v1 - v0, s) + (u0, v0)
-        rays = pixel_rays(camera, grid)
-        coverage[v0:v1, u0:u1, 0] = _area_mean((rays @ axis >= cos_a).astype(float), s)
+    covered = sphere_coverage(camera, center, radius_m, _check_supersample(supersample))
+    if covered is not None:
+        h, w = covered.coverage.shape
+        coverage[covered.v0:covered.v0 + h, covered.u0:covered.u0 + w, 0] = covered.coverage
     image = (coverage * np.asarray(colour_bgr, dtype=float)
              + (1.0 - coverage) * np.asarray(background_bgr, dtype=float))
     return _to_uint8(image, noise_std, rng)
