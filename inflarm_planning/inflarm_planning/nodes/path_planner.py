@@ -3,7 +3,8 @@
 A plan request (topic or service) is planned with ``inflarm_planning.trajectory.plan_trajectory``
 against the latest obstacles: A* on the work-space grid, then shortcut, smoothed, resampled to
 ``trajectory.max_step_m`` and timed. The path is published latched for the pressure controller
-(which follows it waypoint by waypoint), with markers of the scene. When the obstacles change,
+(which follows it with a reference moving along it: `inflarm_control.path_following`), with
+markers of the scene. When the obstacles change,
 the last request's goal is planned again, from the measured end point if one is fresh (else from
 the request's start). A plan that finds no path publishes none; its PlanOutcome gives the
 NoPathError's reason and text. Invalid input (``ValueError`` from ``inflarm_planning.requests``
