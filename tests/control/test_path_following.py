@@ -71,7 +71,7 @@ def test_a_preloaded_trial_holds_a_point_on_the_axis_that_the_quadrant_rule_cann
     target = np.array(START)
     errors = {}
     for preload in (0.0, 6e3):
-        plant = SoftArmPlant(1, SoftArmPlantParams(noise_std=0.5e-3), np.random.default_rng(7))
+        plant = SoftArmPlant(1, SoftArmPlantParams(), np.random.default_rng(7))
         plant.reset(target)
         controller = PidIlcController(1, PidIlcParams(bellows_preload=preload))
         controller.start_trial(target, target, initial_output=plant.chamber_pressures)
@@ -237,7 +237,7 @@ def follow_scenario(path, feedforward, seed):
     """Hold the start (a one-waypoint path, 20 s), then follow the path, as the demo does; the
     commands reach the plant ``DELAY_STEPS`` steps late (the loop's latency). Returns the true
     end points while following and the time taken [s]."""
-    plant = SoftArmPlant(1, SoftArmPlantParams(noise_std=0.5e-3), np.random.default_rng(seed))
+    plant = SoftArmPlant(1, SoftArmPlantParams(), np.random.default_rng(seed))
     plant.reset(START)
     params = PathFollowingParams()
     pending = [plant.chamber_pressures[0]] * DELAY_STEPS
