@@ -113,8 +113,9 @@ class SoftArmPlantParams:
     (section 2.2, Fig 5A: X, Y -202..202 mm, Z 574..990 mm under 0-100 kPa), the Fig 7 start
     (0, 0, 604) mm at 0 kPa, Fig 4 (20 kPa visibly bends and stretches the arm), the valves'
     0-4 kPa dead zone (4.3.2) and the qualitative dynamics of 3.3 (the large PEA chamber is
-    slow and overshoots; y is the slowest axis). Fig 7 and 8's time responses are reproduced,
-    not fitted, by the chosen time constants below (``inflarm_hw/README.md`` compares them).
+    slow and overshoots; y is the slowest axis). The time constants below are chosen, not
+    identified; with them the Fig 7 task's time responses come out near the paper's
+    (``inflarm_hw/README.md`` compares them).
 
     Attributes
     ----------
