@@ -14,7 +14,7 @@ was skipped and why. Progress, and the output of a benchmark that failed, go to 
 Time on the shared 2-core machine: ``--quick`` (a few seconds a benchmark, for CI smoke) about
 40 s; the full run about 6 min, 11 min when the machine is busy: planning ~2.5 min (1 mm grids,
 tcod, heapq), knowledge ~1.5 min (the full 67,200-point build), elastostatic ~15-30 s (with its
-ambiguity search), load_estimator ~30 s (20 s of joint_states at 1 kHz), vision ~25 s, the
+ambiguity search), load_estimator ~3 min (six runs of 20 s), vision ~25 s, the
 others ~10 s each.
 
 Exit code 0 when every benchmark ran, whether its targets were met or not (targets are
