@@ -123,11 +123,12 @@ def bench_tracker(arm, old, motions: int, rounds: int) -> dict:
     """Warm updates along smooth motions [us each], and every 20th sample's cold estimate by
     this tree and by main [us, median over ``rounds``]."""
     rng = np.random.default_rng(7)
-    warm, cold, before = [], [], []
+    warm, cold, before, main_warm = [], [], [], []
     clock = time.perf_counter
     for _ in range(motions):
         q_m, tau = motion(arm, rng)
         tracker = LoadTracker(arm, K)
+        main_tracker = old.LoadTracker(arm, K) if old is not None else None
         for i in range(len(q_m)):
             starts = tracker.cold_starts
             t0 = clock()
@@ -135,6 +136,13 @@ def bench_tracker(arm, old, motions: int, rounds: int) -> dict:
             elapsed = (clock() - t0) * 1e6
             if tracker.cold_starts == starts:  # a warm update
                 warm.append(elapsed)
+            if main_tracker is not None:  # main's tracker on the same sample, right after
+                starts = main_tracker.cold_starts
+                t0 = clock()
+                main_tracker.update(q_m[i], tau[i])
+                elapsed = (clock() - t0) * 1e6
+                if main_tracker.cold_starts == starts:
+                    main_warm.append(elapsed)
             if i % 20 == 10:
                 sample = (arm, q_m[i], tau[i], K)
                 calls = {'cold': lambda s=sample: estimate_load_and_pose(*s)}
@@ -144,7 +152,7 @@ def bench_tracker(arm, old, motions: int, rounds: int) -> dict:
                 cold.append(timing['cold'].median_us)
                 if old is not None:
                     before.append(timing['main'].median_us)
-    return {'warm': warm, 'cold': cold, 'main': before}
+    return {'warm': warm, 'cold': cold, 'main': before, 'main_warm': main_warm}
 
 
 def bench_batch(arm, old, n: int, rounds: int) -> dict:
@@ -250,6 +258,10 @@ def rows(m: dict) -> list[Row]:
             Target(at_most=TRACKER_TARGET_US, ratio_at_most=TRACKER_TARGET_RATIO),
             f"{len(tracker['warm'])} updates along smooth motions to 100 N, p90 "
             f"{np.percentile(tracker['warm'], 90):.1f} us"),
+        Row('LoadTracker.update, warm', warm, 'us', *(
+            ("main's LoadTracker.update, warm", statistics.median(tracker['main_warm']))
+            if tracker['main_warm'] else ('', None)),
+            note='the same samples, timed alternately' if tracker['main_warm'] else no_main),
         Row('estimate_load_and_pose, cold (search included)', cold, 'us',
             *(("main's estimate_load_and_pose", statistics.median(tracker['main']))
               if have_main else ('', None)), note='' if have_main else no_main),
@@ -309,6 +321,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f'  warm update                 median {w:8.1f} us  p90 {np.percentile(warm, 90):8.1f} '
           f'us  ({w / cold:.3f}x the cold estimate)')
     print(f'  cold estimate (with search) median {cold:8.1f} us')
+    if tracker['main_warm']:
+        b = statistics.median(tracker['main_warm'])
+        print(f"  main's warm update          median {b:8.1f} us  (this one {w / b:.3f}x it)")
     if tracker['main']:
         b = statistics.median(tracker['main'])
         print(f'  main estimate_load_and_pose median {b:8.1f} us  (warm update {w / b:.2f}x it)')

@@ -5,9 +5,9 @@ Run as ``source scripts/env.sh && python benchmarks/bench_kinematics.py [--round
 same run:
 
 - one call of ``FlexibleArm.fk_and_jacobian`` against a bare Pinocchio
-  ``computeFrameJacobian`` call on the same model (target: ratio <= 1.5) and against the plain
-  numpy per-joint DH chain ``dh_jacobian_reference`` (one pass of 4x4 products, the pose is
-  its last frame);
+  ``computeFrameJacobian`` call on the same model (no target since issue 19: no caller needs
+  one call faster) and against the plain numpy per-joint DH chain ``dh_jacobian_reference``
+  (one pass of 4x4 products, the pose is its last frame);
 - the vectorized batch forms per configuration for N = 10,000 (target: <= 1 us each).
 
 Candidates are timed round-robin (``common.interleaved``), so that load from other processes on
@@ -23,7 +23,11 @@ import pinocchio as pin
 
 from inflarm_model.kinematics import FlexibleArm, dh_fk_reference, dh_jacobian_reference
 
-TARGET_SINGLE_RATIO = 1.5
+# The former target of one call, <= 1.5x bare Pinocchio, was dropped (issue 19): it serves no
+# user. The loops that need speed run batches or compiled kernels (the solvers, LoadTracker's
+# warm step); the nodes call fk once per message (load_estimator: ~2 us of a 1 ms period).
+SINGLE_TARGET_DROPPED = ('no target: no caller needs one call faster (loops use the batch '
+                         'forms or the compiled kernels)')
 TARGET_BATCH_US = 1.0
 BARE = 'bare pin.computeFrameJacobian'
 SINGLE = {
@@ -78,7 +82,7 @@ def rows(single: dict, batch: dict, n: int) -> list[Row]:
     loop = 'one fk_and_jacobian call per configuration'
     return [
         Row('FlexibleArm.fk_and_jacobian, one call', ours, 'us', BARE, single[BARE],
-            Target(ratio_at_most=TARGET_SINGLE_RATIO), '7 DOF, median of round-robin rounds'),
+            note='7 DOF, median of round-robin rounds; ' + SINGLE_TARGET_DROPPED),
         Row('FlexibleArm.fk_and_jacobian, one call', ours, 'us',
             'bare J + pose, cached oMf reference',
             single['bare J + pose, cached oMf reference'], note='the same outputs, unvalidated'),

@@ -1,6 +1,7 @@
 """Speed of the PID + ILC controller core against a bare numpy PID update, measured in one run.
 
-Target (issue 5): a controller step costs <= 5 us per axis, ILC included. Measured:
+Target (issue 5): a controller step costs <= 5 us per axis, ILC included, for the batch (since
+issue 19 not for n = 1: the node steps at about 5 Hz). Measured:
 
 - ``PidIlcController.step`` for n = 1 (the ROS node) and n = 10,000 tasks (building the
   experiential knowledge database), per step and per axis (step time / (3 n));
@@ -25,6 +26,10 @@ from inflarm_hw.sra_plant import SoftArmPlant
 START = (0.0, 0.0, 0.604)
 TARGET = (0.100, 0.110, 0.670)
 TARGET_US_PER_AXIS = 5.0
+# n = 1 (the pressure_controller node) has no target since issue 19: at its rate (about 5 Hz,
+# the paper's) a step of a few us per axis is a millionth of the period, and the plant's step
+# is ~50x longer. The target holds for the batch (building the knowledge database).
+N1_TARGET_DROPPED = '; no target at n = 1: the node steps at ~5 Hz, the plant costs 50x more'
 TRIAL_STEPS = 150  # a 30 s trial at 0.2 s
 
 
@@ -101,9 +106,9 @@ def rows(m: dict[int, dict]) -> list[Row]:
         total = f['step'] + f['learn']
         out.append(Row(f'step + ILC per axis, n = {n}', total / (3 * n) * 1e6, 'us',
                        'bare numpy PID per axis', f['baseline'] / (3 * n) * 1e6,
-                       Target(at_most=TARGET_US_PER_AXIS),
+                       Target(at_most=TARGET_US_PER_AXIS) if n > 1 else None,
                        f"finish_trial amortized over memory_steps; the plant's step "
-                       f"{f['plant'] * 1e6:.0f} us"))
+                       f"{f['plant'] * 1e6:.0f} us" + (N1_TARGET_DROPPED if n == 1 else '')))
     return out
 
 

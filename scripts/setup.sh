@@ -45,10 +45,15 @@ fi
 # from the on-disk cache in a second; compiling here keeps the first node start and test fast.
 # shellcheck disable=SC1091
 ( source scripts/env.sh && python -c '
+from inflarm_estimation.elastostatic import LoadTracker
 from inflarm_model.elastostatics import warm_up
+from inflarm_model.kinematics import FlexibleArm
 from inflarm_planning.astar import plan_path
 from inflarm_planning.scenario import GOAL, OBSTACLE, START
 warm_up()
+tracker = LoadTracker(FlexibleArm(), 172.71)
+for _ in range(2):  # a cold start, then the compiled warm step
+    tracker.update([0.3, 0.8, -1.2], [0.5, -1.0, 0.2])
 plan_path(START, GOAL, [OBSTACLE], resolution=0.01, alert_margin=0.03)
 ' ) || { echo "setup: compiling the kernels failed" >&2; exit 1; }
 echo "setup: ready ($root)"

@@ -35,6 +35,7 @@ outside the admissible set are reported with NaN estimates, never as numbers.
 from dataclasses import dataclass
 import math
 
+from numba import njit
 import numpy as np
 import numpy.typing as npt
 from scipy.stats import qmc
@@ -44,14 +45,15 @@ from inflarm_model.elastostatics import (
     DEFAULT_TOLERANCE,
     MOTOR_INDICES,
     SPRING_INDICES,
-    LoadSolver,
     check_arm,
     check_rows,
     check_solver_options,
     check_stiffness,
     check_vector,
     conditioning,
+    conditioning_sample,
     link_moments,
+    newton_load_sample,
     solve_load_continuation,
     solve_load_newton,
 )
@@ -239,11 +241,6 @@ def _admissible(solution, max_force) -> npt.NDArray[np.bool_]:
     """Converged (stable, within the model range) with |f| <= max_force."""
     with np.errstate(invalid='ignore'):
         return solution.converged & ((solution.force**2).sum(axis=-1) <= max_force**2)
-
-
-def _distance(a: list[float], b: list[float]) -> float:
-    """max |a_i - b_i| of two q_k [rad]."""
-    return max(abs(x - y) for x, y in zip(a, b, strict=True))
 
 
 def _collect(arm, Q_m, Tau, k, starts, tol, max_iterations, max_force) -> _Candidates:
@@ -471,6 +468,85 @@ def estimate_load_and_pose_batch(
 
 # --- streams ---------------------------------------------------------------------------------
 
+# Indices of the tracker's options array (one float array: a compiled call takes few arguments).
+_REACH_FACTOR, _MIN_REACH, _TOL, _MAX_FORCE, _MAX_MOTOR_STEP, _MAX_TORQUE_STEP = range(6)
+
+
+@njit(cache=True, error_model='numpy')
+def _q_distance(a, b):
+    """max |a_i - b_i| of two q_k [rad]."""
+    d = 0.0
+    for i in range(4):
+        d = max(d, abs(a[i] - b[i]))
+    return d
+
+
+@njit(cache=True, error_model='numpy')
+def _tracker_step(dh_table, k, q_m, tau_m, previous_q_m, previous_tau_m, branches, motion,
+                  directions, options, max_iterations):
+    """One warm step of ``LoadTracker``: the branches that continue, in compiled code.
+
+    Returns ``(n, q_k, force, tip, motion, directions, condition, iterations, residual)`` of
+    the n solutions kept, in the order ``LoadTracker`` documents (the continuation of each
+    branch, then what lies within its reach); n = -1 when the input jumped (a cold start is
+    due), n = 0 when every branch was lost.
+    """
+    for i in range(3):
+        if not (abs(q_m[i] - previous_q_m[i]) <= options[_MAX_MOTOR_STEP]
+                and abs(tau_m[i] - previous_tau_m[i]) <= options[_MAX_TORQUE_STEP]):
+            return (-1, np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3)), np.empty(0),
+                    np.empty((0, 4)), np.empty(0), 0, math.nan)
+    reach_factor, min_reach = options[_REACH_FACTOR], options[_MIN_REACH]
+    n = branches.shape[0]
+    rows = 3 * n  # starts: p (rows 0..n-1), p + R v, p - R v
+    Q, F, T = np.empty((rows, 4)), np.empty((rows, 3)), np.empty((rows, 3))
+    J = np.empty((rows, 6, 7))
+    ok = np.zeros(rows, np.bool_)
+    iterations, residuals = np.zeros(rows, np.int64), np.zeros(rows)
+    start = np.empty(4)
+    for b in range(n):
+        reach = max(reach_factor * motion[b], min_reach)
+        for part in range(3):
+            sign = 0.0 if part == 0 else (1.0 if part == 1 else -1.0)
+            for s in range(4):
+                start[s] = branches[b, s] + sign * reach * directions[b, s]
+            row = part * n + b
+            status, iterations[row], residuals[row] = newton_load_sample(
+                dh_table, q_m, tau_m, k, start, options[_TOL], max_iterations, Q[row], F[row],
+                T[row], J[row])
+            size = F[row, 0] ** 2 + F[row, 1] ** 2 + F[row, 2] ** 2
+            ok[row] = status == 0 and size <= options[_MAX_FORCE] ** 2
+    kept, kept_motion = np.empty(rows, np.int64), np.empty(rows)
+    m = 0
+    for b in range(n):  # the continuation of each branch, then what lies within its reach
+        if not ok[b]:
+            continue
+        step = _q_distance(Q[b], branches[b])
+        radius = max(reach_factor * max(step, motion[b]), min_reach)
+        for part in range(3):
+            row = part * n + b
+            if not (ok[row] and _q_distance(Q[row], Q[b]) <= radius):
+                continue
+            new = True
+            for t in range(m):
+                if not _q_distance(Q[row], Q[kept[t]]) > _SAME:
+                    new = False
+                    break
+            if new:
+                kept[m] = row
+                kept_motion[m] = step if part == 0 else radius
+                m += 1
+    q_k, force, tip = np.empty((m, 4)), np.empty((m, 3)), np.empty((m, 3))
+    direction, condition = np.empty((m, 4)), np.empty(m)
+    for i in range(m):
+        r = kept[i]
+        q_k[i], force[i], tip[i] = Q[r], F[r], T[r]
+        condition[i] = conditioning_sample(J[r], F[r], k, direction[i])[0]
+    first = kept[0] if m else 0
+    return (m, q_k, force, tip, kept_motion[:m].copy(), direction, condition,
+            iterations[first], residuals[first])
+
+
 
 class LoadTracker:
     """Streaming load and pose estimation that follows one branch of solutions.
@@ -541,9 +617,12 @@ class LoadTracker:
                 raise ValueError(f'expected {name} positive and finite, got {value!r}')
         if not (math.isfinite(float(reach_factor)) and float(reach_factor) >= 1.0):
             raise ValueError(f'expected reach_factor >= 1, got {reach_factor!r}')
-        self._max_motor_step, self._max_torque_step = float(max_motor_step), float(max_torque_step)
-        self._solver = LoadSolver(arm, self._k, tol=tol, max_iterations=max_iterations)
-        self._reach_factor, self._min_reach = float(reach_factor), float(min_reach)
+        options = np.empty(6)
+        options[[_REACH_FACTOR, _MIN_REACH, _TOL, _MAX_FORCE, _MAX_MOTOR_STEP,
+                 _MAX_TORQUE_STEP]] = (reach_factor, min_reach, self._options[0],
+                                       self._options[3], max_motor_step, max_torque_step)
+        self._step_options = options
+        self._k = np.require(self._k, np.float64, ['C', 'W'])
         self.reset()
 
     def reset(self) -> None:
@@ -583,14 +662,14 @@ class LoadTracker:
         ValueError
             If ``q_m`` or ``tau_m`` is not 3 finite numbers (the history is kept).
         """
-        q_m = check_vector('q_m', q_m, 3, 'rad')
-        tau_m = check_vector('tau_m', tau_m, 3, 'N·m')
+        # Copies: the history must not change with the caller's arrays, and the compiled
+        # step takes one array type (C-contiguous, writable).
+        q_m = np.array(check_vector('q_m', q_m, 3, 'rad'))
+        tau_m = np.array(check_vector('tau_m', tau_m, 3, 'N·m'))
         previous, self._input = self._input, (q_m, tau_m)
-        if (previous is None or not self._branches.size
-                or np.abs(q_m - previous[0]).max() > self._max_motor_step
-                or np.abs(tau_m - previous[1]).max() > self._max_torque_step):
+        if previous is None or not self._branches.size:
             return self._cold(q_m, tau_m)
-        return self._warm(q_m, tau_m)
+        return self._warm(q_m, tau_m, *previous)
 
     def _cold(self, q_m, tau_m) -> LoadPoseEstimate:
         self._cold_starts += 1
@@ -607,50 +686,28 @@ class LoadTracker:
             self._directions = conditioning(J, np.array([s[0] for s in found]), self._k)[2]
         return estimates[0]
 
-    def _warm(self, q_m, tau_m) -> LoadPoseEstimate:
-        tol, max_iterations, max_condition, max_force = self._options
-        p, n = self._branches, len(self._branches)
-        reach = np.maximum(self._reach_factor * self._motion, self._min_reach)[:, None]
-        starts = np.concatenate([p, p + reach * self._directions, p - reach * self._directions])
-        solution = self._solver.newton(np.tile(q_m, (3 * n, 1)), np.tile(tau_m, (3 * n, 1)),
-                                       starts)
-        ok = _admissible(solution, max_force).tolist()
-        q_k, previous, moved = solution.q_k.tolist(), p.tolist(), self._motion.tolist()
-        rows, motion = [], []
-        for b in range(n):  # the continuation of each branch, then what lies within its reach
-            if not ok[b]:
-                continue
-            r = q_k[b]
-            step = _distance(r, previous[b])
-            radius = max(self._reach_factor * max(step, moved[b]), self._min_reach)
-            for row in (b, n + b, 2 * n + b):
-                if ok[row] and _distance(q_k[row], r) <= radius and all(
-                        _distance(q_k[row], q_k[t]) > _SAME for t in rows):
-                    rows.append(row)
-                    motion.append(step if row == b else radius)
-        if not rows:
+    def _warm(self, q_m, tau_m, previous_q_m, previous_tau_m) -> LoadPoseEstimate:
+        n, q_k, force, tip, motion, directions, cond, iterations, residual = _tracker_step(
+            self._arm.dh_table, self._k, q_m, tau_m, previous_q_m, previous_tau_m,
+            self._branches, self._motion, self._directions, self._step_options,
+            self._options[1])
+        if n <= 0:  # the input jumped, or every branch was lost
             return self._cold(q_m, tau_m)
-        cond, _, directions = conditioning(solution.jacobian[rows], solution.force[rows],
-                                           self._k)
-        self._branches, self._motion = solution.q_k[rows], np.array(motion)
-        self._directions = directions
-        iterations, residual = int(solution.iterations[rows[0]]), float(
-            solution.residual[rows[0]])
+        self._branches, self._motion, self._directions = q_k, motion, directions
+        max_condition = self._options[2]
+        condition = float(cond[0])
+        if n == 1 and condition <= max_condition:
+            return LoadPoseEstimate(force[0], q_k[0].copy(), self._k * q_k[0], tip[0],
+                                    iterations, True, condition, residual, 'converged', '')
         nan3, nan4 = np.full(3, np.nan), np.full(4, np.nan)
-        if len(rows) == 1:
-            i = rows[0]
-            if cond[0] <= max_condition:
-                return LoadPoseEstimate(
-                    solution.force[i], solution.q_k[i], solution.tau_k[i],
-                    solution.tip_position[i], iterations, True, float(cond[0]), residual,
-                    'converged', '')
-            reason = _REASONS['singular'].format(cond=cond[0], max_cond=max_condition)
+        if n == 1:
+            reason = _REASONS['singular'].format(cond=condition, max_cond=max_condition)
             return LoadPoseEstimate(nan3, nan4, nan4.copy(), nan3.copy(), iterations, False,
-                                    float(cond[0]), residual, 'singular', reason)
-        forces = sorted((solution.force[i] for i in rows), key=lambda f: float(np.linalg.norm(f)))
+                                    condition, residual, 'singular', reason)
+        forces = sorted(force, key=lambda f: float(np.linalg.norm(f)))
         reason = _REASONS['ambiguous'].format(n=len(forces), loads=_fmt(forces))
         return LoadPoseEstimate(nan3, nan4, nan4.copy(), nan3.copy(), iterations, False,
-                                float(cond[0]), residual, 'ambiguous', reason, tuple(forces))
+                                condition, residual, 'ambiguous', reason, tuple(forces))
 
 
 # --- wrinkling guard --------------------------------------------------------------------------

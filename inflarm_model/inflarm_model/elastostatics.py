@@ -68,7 +68,6 @@ __all__ = [
     'SPRING_INDICES',
     'STATUS_NAMES',
     'ElastostaticSolution',
-    'LoadSolver',
     'check_arm',
     'check_batch',
     'check_rows',
@@ -76,12 +75,14 @@ __all__ = [
     'check_stiffness',
     'check_vector',
     'conditioning',
+    'conditioning_sample',
     'equilibrium_stiffness',
     'link_moments',
     'load_hessian',
     'load_torques',
     'motor_load',
     'motor_torques',
+    'newton_load_sample',
     'reduced_newton_matrix',
     'solve_load_continuation',
     'solve_load_fixed_point',
@@ -445,27 +446,53 @@ def _stable_gu(H, k, out):
     out[0] = _positive_definite(A)
 
 
-@guvectorize(['void(f8[:, :], f8[:], f8[:], f8[:], f8[:], f8[:])'], '(r,n),(c),(s)->(),(),(s)',
-             **_GU)
-def _conditioning_gu(J, f, k, condition, sigma, direction):
+@njit(**_JIT)
+def conditioning_sample(J, f, k, direction):
+    """``conditioning`` of one sample, for compiled callers (a numba kernel).
+
+    Parameters
+    ----------
+    J : ndarray, shape (6, 7)
+        Tip Jacobian.
+    f : ndarray, shape (3,)
+        Tip force [N].
+    k : ndarray, shape (4,)
+        Stiffness [N·m/rad].
+    direction : ndarray, shape (4,)
+        Output: the right singular vector of D's smallest singular value (zeros if D is not
+        finite).
+
+    Returns
+    -------
+    condition, sigma : float
+        The condition number of U_m (inf where singular or not finite) and D's smallest
+        singular value (NaN where D is not finite).
+    """
     U_m = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
             U_m[i, j] = J[i, _M[j]]
-    condition[0], sigma[0] = np.inf, np.nan
+    condition, sigma = np.inf, np.nan
     direction[:] = 0.0
     if not np.isfinite(U_m).all():  # LAPACK refuses NaN
-        return
+        return condition, sigma
     singular = np.linalg.svd(U_m)[1]
     if singular[2] > 0.0:
-        condition[0] = singular[0] / singular[2]
+        condition = singular[0] / singular[2]
     H, D = np.empty((7, 7)), np.empty((4, 4))
     _load_hessian(J, f, H)
     _reduced_newton_matrix(J, H, k, D)
     if np.isfinite(D).all():
         _, values, vt = np.linalg.svd(D)
-        sigma[0] = values[3]
+        sigma = values[3]
         direction[:] = vt[3]
+    return condition, sigma
+
+
+@guvectorize(['void(f8[:, :], f8[:], f8[:], f8[:], f8[:], f8[:])'], '(r,n),(c),(s)->(),(),(s)',
+             **_GU)
+def _conditioning_gu(J, f, k, condition, sigma, direction):
+    condition[0], sigma[0] = conditioning_sample(J, f, k, direction)
 
 
 def _f8(x: npt.ArrayLike) -> npt.NDArray[np.float64]:
@@ -904,6 +931,37 @@ def _solve_sample(dh_table, q_m, load, inverse, fixed_point, k, q_k0, tol, max_i
 
 
 @njit(**_JIT)
+def newton_load_sample(dh_table, q_m, tau_m, k, q_k0, tol, max_iterations, q_k_out, f_out,
+                       tip_out, J_out):
+    """``solve_load_newton`` of one sample, for compiled callers (a numba kernel).
+
+    Parameters
+    ----------
+    dh_table : ndarray
+        ``FlexibleArm.dh_table``.
+    q_m, tau_m : ndarray, shape (3,)
+        Finite motor angles [rad] and torques [N·m] (eq. 6 convention); the caller checked them.
+    k : ndarray, shape (4,)
+        Stiffness [N·m/rad] (``check_stiffness``).
+    q_k0 : ndarray, shape (4,)
+        Start [rad].
+    tol : float
+        Residual tolerance [N·m].
+    max_iterations : int
+        Newton steps allowed.
+    q_k_out, f_out, tip_out, J_out : ndarray, shapes (4,), (3,), (3,), (6, 7)
+        Outputs: the last iterate, its force, tip and Jacobian.
+
+    Returns
+    -------
+    status, iterations, residual
+        Status code (index of ``STATUS_NAMES``; 0 is converged), Newton steps, residual [N·m].
+    """
+    return _solve_sample(dh_table, q_m, tau_m, True, False, k, q_k0, tol, max_iterations,
+                         q_k_out, f_out, tip_out, J_out)
+
+
+@njit(**_JIT)
 def _continue_sample(dh_table, q_m, tau_m, k, steps, tol, max_iterations, q_k_out, f_out,
                      tip_out, J_out):
     """Continuation in the torques: lambda tau_m from 0 to 1, each solved from the last."""
@@ -1132,51 +1190,6 @@ def solve_load_newton(
     """
     return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, q_k0, tol, max_iterations,
                 inverse=True)
-
-
-class LoadSolver:
-    """``solve_load_newton`` for one arm and stiffness, with its options checked once.
-
-    For a loop of many small solves (``LoadTracker``: a few per sample, at up to 1 kHz), where
-    checking every argument on every call would cost more than the compiled solve itself. The
-    same solver, the same result.
-
-    Parameters
-    ----------
-    arm : FlexibleArm
-    stiffness : float or array-like, shape (4,)
-        [N·m/rad].
-    tol, max_iterations
-        As in ``solve_load_newton``.
-    """
-
-    def __init__(self, arm: object, stiffness: npt.ArrayLike, *, tol: float = DEFAULT_TOLERANCE,
-                 max_iterations: int = DEFAULT_MAX_ITERATIONS) -> None:
-        check_arm(arm)
-        self.arm = arm
-        self.stiffness = np.require(check_stiffness(stiffness), np.float64, ['C', 'W'])
-        self.tol, self.max_iterations = check_solver_options(tol, max_iterations)
-
-    def newton(self, q_m: npt.NDArray[np.float64], tau_m: npt.NDArray[np.float64],
-               q_k0: npt.NDArray[np.float64]) -> ElastostaticSolution:
-        """Newton from ``q_k0``, one row each.
-
-        Parameters
-        ----------
-        q_m, tau_m : ndarray, shape (N, 3)
-            Finite motor angles [rad] and torques [N·m] (the caller checked them).
-        q_k0 : ndarray, shape (N, 4)
-            Finite starts [rad].
-
-        Returns
-        -------
-        ElastostaticSolution
-            Of batch shape (N,).
-        """
-        rows = [np.require(x, np.float64, ['C', 'W']) for x in (q_m, tau_m, q_k0)]
-        return _solve_and_shape(self.arm.dh_table, rows[0], rows[1], self.stiffness, rows[2],
-                                self.tol, self.max_iterations, True, _NEWTON, 1,
-                                (len(rows[0]),))
 
 
 def solve_load_continuation(

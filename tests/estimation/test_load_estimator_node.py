@@ -148,3 +148,24 @@ def test_low_pressure_shows_a_negative_margin(executor):
     link_1 = decode(rig.out['links'][0].data, expected=LinkStatus)
     assert link_1.moment > link_1.wrinkling_moment  # 18 N at ~1 m on a 10 kPa link
     assert link_1.margin < 0.0
+
+
+def test_a_stalled_stream_is_reported_stale(executor):
+    rig = Rig(executor, stall_timeout_s=0.2)
+    assert spin_until(executor, lambda: rig.out['diagnostics'], timeout_s=3.0)
+    before = rig.out['diagnostics'][-1].status[0]
+    assert before.level == DiagnosticStatus.WARN and 'no joint_states' in before.message
+    q_m = np.array([0.2, 0.5, -1.1])
+    _, tau_m = loaded_sample(q_m)
+    rig.send(['joint_1', 'joint_2', 'joint_3'], q_m, tau_m)
+    assert spin_until(executor, lambda: rig.out['wrench'])
+    # then nothing: the next reports say the stream stalled, and for how long
+    assert spin_until(executor, lambda: rig.out['diagnostics'][-1].status[0].level
+                      == DiagnosticStatus.STALE, timeout_s=3.0)
+    status = rig.out['diagnostics'][-1].status[0]
+    assert 'joint_states stalled' in status.message
+    values = {kv.key: kv.value for kv in status.values}
+    assert float(values['seconds_since_sample']) > 0.2
+    rig.send(['joint_1', 'joint_2', 'joint_3'], q_m, tau_m)  # the stream resumes
+    assert spin_until(executor, lambda: rig.out['diagnostics'][-1].status[0].level
+                      == DiagnosticStatus.OK, timeout_s=3.0)

@@ -27,13 +27,16 @@ Publishes (only for samples whose estimate converged, stamped with the sample's 
 Publishes always:
     diagnostics (diagnostic_msgs/DiagnosticArray, about 1 Hz): samples, estimates and
         rejections since the last report, statuses, cold starts, samples lost in transport,
-        the latest status, alternatives and conditioning.
+        the latest status, alternatives and conditioning. A report with no sample since the
+        last one, the last sample older than ``stall_timeout_s`` (steady clock), says the
+        stream stalled (level STALE) and for how long; before the first sample, WARN.
 Parameters:
     arm.* (inflarm_model.nodes.arm_parameters): geometry, stiffness, link pressure.
     max_condition_number (double): J_m conditioning beyond which no estimate is trusted.
     max_force_n (double): largest admissible load [N]; a solution above it is no load.
     jump.motor_step_rad, jump.torque_step_nm (double): a change between samples larger than
         these restarts the tracker cold.
+    stall_timeout_s (double, read-only): joint_states silent this long is a stalled stream.
     link_status_rate_hz (double, read-only): rate of link_status.
     frame_id (string, read-only): base frame of the outputs.
     tip_frame_id (string, read-only): frame of the estimated wrench.
@@ -41,6 +44,7 @@ Parameters:
 
 from collections import Counter
 import math
+import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped, WrenchStamped
@@ -67,6 +71,7 @@ from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.diagnostics import (
     ERROR,
     OK,
+    STALE,
     WARN,
     DiagnosticsPublisher,
     diagnostic_status,
@@ -89,6 +94,9 @@ PARAMETERS = ARM_PARAMETERS + (
     Parameter('jump.torque_step_nm', 5.0,
               'a motor torque change between samples above this restarts the tracker [N m]',
               range=(1e-3, 100.0)),
+    Parameter('stall_timeout_s', 0.5,
+              'joint_states silent for longer than this is reported as a stalled stream [s]',
+              range=(0.01, 60.0), read_only=True),
     Parameter('link_status_rate_hz', 10.0, 'rate of link_status [Hz]', range=(0.1, 1000.0),
               read_only=True),
     Parameter('frame_id', 'base_link', 'base frame of the outputs', read_only=True),
@@ -116,6 +124,7 @@ class LoadEstimator(GuardedCallbacks, Node):
         self.samples_total = 0
         self.lost_total = 0  # samples DDS reports lost before they reached the node
         self.last_estimate = None
+        self.last_sample_at: float | None = None  # time.monotonic() of the last message [s]
         self.last_pose: tuple[object, np.ndarray, np.ndarray] | None = None  # stamp, q, force
         self.create_guarded_subscription(
             JointState, 'joint_states', self.on_joint_states, JOINT_STATE_INPUT_QOS,
@@ -159,6 +168,7 @@ class LoadEstimator(GuardedCallbacks, Node):
         self.lost_total += event.total_count_change
 
     def on_joint_states(self, msg: JointState) -> None:
+        self.last_sample_at = time.monotonic()  # the stream is alive, even if this one is bad
         sample = joint_arrays(msg, MOTORS, ('position', 'effort'))
         q_m, effort = sample['position'], sample['effort']
         estimate = self.tracker.update(q_m, -effort)  # effort: the torque the motors apply
@@ -210,8 +220,16 @@ class LoadEstimator(GuardedCallbacks, Node):
         samples = sum(self.statuses.values())
         converged = self.statuses['converged']
         estimate = self.last_estimate
-        if samples == 0:
+        silent = (math.inf if self.last_sample_at is None
+                  else time.monotonic() - self.last_sample_at)
+        if self.last_sample_at is None:
             level, message = WARN, 'no joint_states samples'
+        elif samples == 0 and silent > self.params['stall_timeout_s']:
+            level, message = STALE, (f'joint_states stalled: no sample for {silent:.1f} s '
+                                     f"(stall_timeout_s {self.params['stall_timeout_s']:g})")
+        elif samples == 0:
+            level, message = WARN, 'joint_states arrive, but none could be estimated since ' \
+                'the last report (see rejected_samples_total)'
         elif converged == samples:
             level, message = OK, 'converged'
         else:
@@ -222,6 +240,7 @@ class LoadEstimator(GuardedCallbacks, Node):
             samples=samples, converged=converged, samples_total=self.samples_total,
             rejected_samples_total=rejected, lost_samples_total=self.lost_total,
             cold_starts_total=self.tracker.cold_starts,
+            seconds_since_sample=silent,
             statuses=dict(self.statuses) or 'none',
             last_status='none' if estimate is None else estimate.status,
             last_alternatives='none' if estimate is None else '; '.join(

@@ -5,12 +5,19 @@ rclpy is initialized with its own signal handlers off; the nodes are built (a ``
 parameter error there is a bad configuration: logged, exit code 1), and a stop request during
 that aborts it at once (what was built is destroyed as below).
 
-Stop (SIGINT, SIGTERM, or a node calling `request_stop`): the request wakes the executor
-through its guard condition, the spin loop returns between callbacks, then, in order: the
+Stop (SIGINT, SIGTERM, or a node calling `request_stop`): the spin loop sees the request
+within ``STOP_POLL_PERIOD_S`` and returns between callbacks, then, in order: the
 executor finishes the callbacks in flight, every timer is destroyed (no callback can start
 after this point), every node is destroyed (nodes finish their work in ``destroy_node``, e.g. a
 bag is closed), and the context is shut down. No rcl call can race the shutdown, so a stop at
 any moment exits 0 without a traceback.
+
+Executor: ``INFLARM_EXECUTOR`` in the environment chooses it for every node process, one way
+for all: ``events`` (default: ``rclpy.experimental.EventsExecutor``, rclpy's C++ executor) or
+``single_threaded`` (rclpy's Python ``SingleThreadedExecutor``). An unknown name is a bad
+configuration (exit 1). ``run_nodes(..., multithreaded=True)`` (several nodes in one process
+whose callbacks may block each other) takes rclpy's ``MultiThreadedExecutor`` whatever the
+environment says. The estimation README gives the measurements behind the default.
 """
 
 from collections.abc import Callable, Sequence
@@ -25,6 +32,7 @@ from rclpy.executors import (
     MultiThreadedExecutor,
     SingleThreadedExecutor,
 )
+from rclpy.experimental import EventsExecutor
 import rclpy.logging
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -32,15 +40,42 @@ from rclpy.task import Future
 
 from inflarm_msgs_json.ros.signals import (
     StartupInterrupted,
-    add_wakeup,
     install_stop_handlers,
     interruptible_startup,
-    remove_wakeup,
     request_stop,
     stop_requested,
 )
 
-__all__ = ['request_stop', 'run_nodes', 'spin_node']
+__all__ = ['DEFAULT_EXECUTOR', 'EXECUTORS', 'EXECUTOR_ENV', 'executor_kind', 'make_executor',
+           'request_stop', 'run_nodes', 'spin_node']
+
+EXECUTOR_ENV = 'INFLARM_EXECUTOR'
+EXECUTORS = {'events': EventsExecutor, 'single_threaded': SingleThreadedExecutor}
+"""The executors a node process can spin on, by the name ``INFLARM_EXECUTOR`` gives."""
+DEFAULT_EXECUTOR = 'events'
+
+
+def executor_kind(environ: dict[str, str] | None = None) -> str:
+    """The executor named by ``INFLARM_EXECUTOR`` (``DEFAULT_EXECUTOR`` when unset or empty).
+
+    Raises
+    ------
+    ValueError
+        If the name is not a key of `EXECUTORS`.
+    """
+    kind = (os.environ if environ is None else environ).get(EXECUTOR_ENV, '').strip()
+    kind = kind or DEFAULT_EXECUTOR
+    if kind not in EXECUTORS:
+        raise ValueError(f'expected {EXECUTOR_ENV} in {sorted(EXECUTORS)}, got {kind!r}')
+    return kind
+
+
+def make_executor(kind: str | None = None, *, multithreaded: bool = False) -> Executor:
+    """The executor of ``kind`` (a key of `EXECUTORS`; `executor_kind` if None), on the
+    default context; a ``MultiThreadedExecutor`` if ``multithreaded``."""
+    if multithreaded:
+        return MultiThreadedExecutor()
+    return EXECUTORS[executor_kind() if kind is None else kind]()
 
 
 def spin_node(make_node: Callable[[], Node], args: list[str] | None = None) -> None:
@@ -59,11 +94,18 @@ def run_nodes(make_nodes: Sequence[Callable[[], Node]], args: list[str] | None =
     args : list of str, optional
         Command-line arguments for ``rclpy.init`` (``--ros-args ...``); ``sys.argv`` if None.
     multithreaded : bool
-        Spin on a ``MultiThreadedExecutor`` instead of a single thread.
+        Spin on a ``MultiThreadedExecutor`` instead of the executor ``INFLARM_EXECUTOR``
+        names.
     """
     install_stop_handlers()
     if stop_requested():
         return
+    try:
+        kind = executor_kind()
+    except ValueError as error:
+        executable = os.path.basename(sys.argv[0]) or 'node'
+        rclpy.logging.get_logger(executable).error(f'cannot start: {error}')
+        sys.exit(1)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Node] = []
     executor: Executor | None = None
@@ -77,7 +119,7 @@ def run_nodes(make_nodes: Sequence[Callable[[], Node]], args: list[str] | None =
                     executable = os.path.basename(sys.argv[0]) or 'node'
                     rclpy.logging.get_logger(executable).error(f'cannot start: {error}')
                     sys.exit(1)
-        executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
+        executor = make_executor(kind, multithreaded=multithreaded)
         for node in nodes:
             executor.add_node(node)
         _spin_until_stop(executor)
@@ -89,18 +131,21 @@ def run_nodes(make_nodes: Sequence[Callable[[], Node]], args: list[str] | None =
         _stop_in_order(executor, nodes)
 
 
+# How often the spin loop looks for a stop request [s]: the longest a stop waits to begin.
+STOP_POLL_PERIOD_S = 0.05
+
+
 def _spin_until_stop(executor: Executor) -> None:
-    stopped = Future()
+    """Spin until a stop request, looking for one every ``STOP_POLL_PERIOD_S``.
 
-    def wake() -> None:
-        stopped.set_result(True)
-        executor.wake()
-
-    add_wakeup(wake)
-    try:
-        executor.spin_until_future_complete(stopped)
-    finally:
-        remove_wakeup(wake)
+    Polled, not pushed: the ``EventsExecutor`` of this rclpy (7.1) supports no guard
+    conditions, deadlocks when a future is completed from another thread, and never returns
+    from ``spin_until_future_complete`` without a timeout; with one it serves every callback
+    and returns on time.
+    """
+    never = Future()
+    while not stop_requested():
+        executor.spin_until_future_complete(never, timeout_sec=STOP_POLL_PERIOD_S)
 
 
 def _stop_in_order(executor: Executor | None, nodes: list[Node]) -> None:
