@@ -50,10 +50,10 @@ ROSDEP_KEYS = {
     'PIL': 'python3-pil',
     'skimage': 'python3-skimage',
 }
-# Modules from PyPI without a rosdep key that fits, installed from requirements.txt and named in a
-# comment of the package.xml: viser, dask and distributed have no key in rosdistro; websockets comes
-# with viser (viser needs >= 13.1; the key python3-websockets installs an older one, 10.4 in Debian
-# bookworm).
+# Modules from PyPI without a rosdep key that fits, installed from requirements.txt and named in
+# a comment of the package.xml: viser, dask and distributed have no key in rosdistro; websockets
+# comes with viser (viser needs >= 13.1; the key python3-websockets installs an older one, 10.4
+# in Debian bookworm).
 PYPI_ONLY = {'viser', 'websockets', 'dask', 'distributed'}
 # ROS packages whose Python module has the package's own name.
 ROS_PACKAGES = {

@@ -43,7 +43,10 @@ def start_entry_point(tmp_path, module: str, source: str, **env) -> subprocess.P
 
 
 def test_the_executor_name_comes_from_the_environment():
-    assert executor_kind({}) == DEFAULT_EXECUTOR
+    assert executor_kind({}) == DEFAULT_EXECUTOR == 'single_threaded'
+    assert executor_kind({}, default='events') == 'events'  # a node's own default
+    assert executor_kind({'INFLARM_EXECUTOR': 'single_threaded'}, default='events') \
+        == 'single_threaded'
     assert executor_kind({'INFLARM_EXECUTOR': ' single_threaded '}) == 'single_threaded'
     assert executor_kind({'INFLARM_EXECUTOR': 'events'}) == 'events'
     with pytest.raises(ValueError, match='INFLARM_EXECUTOR'):

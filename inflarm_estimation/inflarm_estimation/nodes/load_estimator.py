@@ -252,7 +252,7 @@ class LoadEstimator(GuardedCallbacks, Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    spin_node(LoadEstimator, args)
+    spin_node(LoadEstimator, args, default_executor='events')  # fed at 1 kHz
 
 
 if __name__ == '__main__':

@@ -11,10 +11,10 @@ node's modules import is lost or ends in a traceback. Instead, every node execut
    handlers exist waits for them instead of killing the interpreter;
 2. while it imports its node module and builds its nodes (`interruptible_startup`), a stop
    request aborts that (`StartupInterrupted`) and the process exits 0 at once;
-3. from then on a stop request only sets a flag and calls the registered wake-ups (the
-   executor's guard condition) from a watcher thread woken through ``signal.set_wakeup_fd``,
-   since the main thread may be blocked in rcl's wait (see ``inflarm_msgs_json.ros.spin``); the
-   spin loop returns between callbacks and the node is destroyed in order.
+3. from then on a stop request only sets a flag, from a watcher thread woken through
+   ``signal.set_wakeup_fd`` (the main thread may be blocked in rcl's wait); the spin loop looks
+   for it between waits (see ``inflarm_msgs_json.ros.spin``), returns between callbacks and
+   the node is destroyed in order.
 
 Stdlib only: this module must stay cheap to import.
 """
@@ -32,8 +32,6 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 STACKS_SIGNAL = signal.SIGUSR1  # prints every thread's stack to stderr: why a node hangs
 
 _stop = threading.Event()
-_lock = threading.Lock()
-_wakeups: list[Callable[[], None]] = []
 _abort_startup = False
 _installed = False
 
@@ -52,7 +50,7 @@ def _on_signal(signum: int, frame) -> None:
 
 
 def _watch_signals(read_fd: int) -> None:
-    """Run the wake-ups as soon as a stop signal arrives.
+    """Set the stop flag as soon as a stop signal arrives.
 
     The Python-level handler above runs only when the main thread next executes bytecode, which
     a thread blocked in rcl's wait does not; the interpreter's C-level handler writes the signal
@@ -66,14 +64,6 @@ def _watch_signals(read_fd: int) -> None:
             return
         if stop_numbers.intersection(received):
             _stop.set()
-            _run_wakeups()
-
-
-def _run_wakeups() -> None:
-    with _lock:
-        wakeups = list(_wakeups)
-    for wakeup in wakeups:
-        wakeup()
 
 
 def install_stop_handlers() -> None:
@@ -103,21 +93,6 @@ def stop_requested() -> bool:
 def request_stop() -> None:
     """Ask the process to stop, as a signal would (for in-process callers)."""
     _stop.set()
-    _run_wakeups()
-
-
-def add_wakeup(callback: Callable[[], None]) -> None:
-    """Call ``callback`` (from a helper thread) when a stop is requested; at once if it was."""
-    with _lock:
-        _wakeups.append(callback)
-    if _stop.is_set():
-        callback()
-
-
-def remove_wakeup(callback: Callable[[], None]) -> None:
-    with _lock:
-        if callback in _wakeups:
-            _wakeups.remove(callback)
 
 
 def _quiet_unraisable(hook: Callable) -> Callable:

@@ -12,10 +12,13 @@ after this point), every node is destroyed (nodes finish their work in ``destroy
 bag is closed), and the context is shut down. No rcl call can race the shutdown, so a stop at
 any moment exits 0 without a traceback.
 
-Executor: ``INFLARM_EXECUTOR`` in the environment chooses it for every node process, one way
-for all: ``events`` (default: ``rclpy.experimental.EventsExecutor``, rclpy's C++ executor) or
-``single_threaded`` (rclpy's Python ``SingleThreadedExecutor``). An unknown name is a bad
-configuration (exit 1). ``run_nodes(..., multithreaded=True)`` (several nodes in one process
+Executor: ``single_threaded`` (rclpy's Python ``SingleThreadedExecutor``) or ``events``
+(``rclpy.experimental.EventsExecutor``, rclpy's C++ executor: less CPU per message, but no
+guard conditions, which ``path_planner``'s planning thread needs). A node's executable names its
+default (`spin_node`'s ``default_executor``: ``load_estimator``, the node fed at 1 kHz, takes
+``events``; every other, `DEFAULT_EXECUTOR`); ``INFLARM_EXECUTOR`` in the environment
+overrides it for any node process, one way for all. An unknown name is a bad configuration
+(exit 1). ``run_nodes(..., multithreaded=True)`` (several nodes in one process
 whose callbacks may block each other) takes rclpy's ``MultiThreadedExecutor`` whatever the
 environment says. The estimation README gives the measurements behind the default.
 """
@@ -52,11 +55,11 @@ __all__ = ['DEFAULT_EXECUTOR', 'EXECUTORS', 'EXECUTOR_ENV', 'executor_kind', 'ma
 EXECUTOR_ENV = 'INFLARM_EXECUTOR'
 EXECUTORS = {'events': EventsExecutor, 'single_threaded': SingleThreadedExecutor}
 """The executors a node process can spin on, by the name ``INFLARM_EXECUTOR`` gives."""
-DEFAULT_EXECUTOR = 'events'
+DEFAULT_EXECUTOR = 'single_threaded'
 
 
-def executor_kind(environ: dict[str, str] | None = None) -> str:
-    """The executor named by ``INFLARM_EXECUTOR`` (``DEFAULT_EXECUTOR`` when unset or empty).
+def executor_kind(environ: dict[str, str] | None = None, default: str = DEFAULT_EXECUTOR) -> str:
+    """The executor named by ``INFLARM_EXECUTOR`` (``default`` when unset or empty).
 
     Raises
     ------
@@ -64,7 +67,7 @@ def executor_kind(environ: dict[str, str] | None = None) -> str:
         If the name is not a key of `EXECUTORS`.
     """
     kind = (os.environ if environ is None else environ).get(EXECUTOR_ENV, '').strip()
-    kind = kind or DEFAULT_EXECUTOR
+    kind = kind or default
     if kind not in EXECUTORS:
         raise ValueError(f'expected {EXECUTOR_ENV} in {sorted(EXECUTORS)}, got {kind!r}')
     return kind
@@ -78,13 +81,15 @@ def make_executor(kind: str | None = None, *, multithreaded: bool = False) -> Ex
     return EXECUTORS[executor_kind() if kind is None else kind]()
 
 
-def spin_node(make_node: Callable[[], Node], args: list[str] | None = None) -> None:
-    """Run one node until a stop request; exit 1 if it cannot be built from its parameters."""
-    run_nodes([make_node], args)
+def spin_node(make_node: Callable[[], Node], args: list[str] | None = None,
+              default_executor: str = DEFAULT_EXECUTOR) -> None:
+    """Run one node until a stop request on ``default_executor`` (a key of `EXECUTORS`) unless
+    ``INFLARM_EXECUTOR`` names another; exit 1 if it cannot be built from its parameters."""
+    run_nodes([make_node], args, default_executor=default_executor)
 
 
 def run_nodes(make_nodes: Sequence[Callable[[], Node]], args: list[str] | None = None,
-              multithreaded: bool = False) -> None:
+              multithreaded: bool = False, default_executor: str = DEFAULT_EXECUTOR) -> None:
     """Run several nodes in this process on one executor until a stop request.
 
     Parameters
@@ -94,14 +99,15 @@ def run_nodes(make_nodes: Sequence[Callable[[], Node]], args: list[str] | None =
     args : list of str, optional
         Command-line arguments for ``rclpy.init`` (``--ros-args ...``); ``sys.argv`` if None.
     multithreaded : bool
-        Spin on a ``MultiThreadedExecutor`` instead of the executor ``INFLARM_EXECUTOR``
-        names.
+        Spin on a ``MultiThreadedExecutor`` instead.
+    default_executor : str
+        The executor (a key of `EXECUTORS`) unless ``INFLARM_EXECUTOR`` names another.
     """
     install_stop_handlers()
     if stop_requested():
         return
     try:
-        kind = executor_kind()
+        kind = executor_kind(default=default_executor)
     except ValueError as error:
         executable = os.path.basename(sys.argv[0]) or 'node'
         rclpy.logging.get_logger(executable).error(f'cannot start: {error}')
