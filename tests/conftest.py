@@ -21,6 +21,15 @@ os.environ.update(ros_environment())
 from ros_harness import NodeProcesses, lock_free_domain  # noqa: E402
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(items):
+    """A test that starts node executables (``node_processes``) is a system test, marked or not:
+    the fast lane (``-m 'not system'``) then leaves it out."""
+    for item in items:
+        if 'node_processes' in getattr(item, 'fixturenames', ()):
+            item.add_marker(pytest.mark.system)
+
+
 @pytest.fixture
 def domain_id():
     """A ROS domain id that no other test, in this run or any other, uses meanwhile."""

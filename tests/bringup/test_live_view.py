@@ -120,6 +120,7 @@ def test_a_port_in_use_is_an_error_naming_it():
             start_server('127.0.0.1', port)
 
 
+@pytest.mark.system
 def test_the_executable_exits_1_naming_a_port_in_use(domain_id, tmp_path):
     from inflarm_bringup.processes import NodeProcess, ros_environment
     with socket.socket() as holder:

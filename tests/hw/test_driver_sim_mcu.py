@@ -31,9 +31,16 @@ def mcu_thread(request):
     thread.close()
 
 
+# The link timeout of the tests that are not about it: the MCU thread and the test share this
+# process, and with two CPU hogs beside the suite (load average 15) the link went quiet for up
+# to 1.0 s (measured: 268 ms and 997 ms stalls failed 0.2 s and 0.5 s timeouts). The timeout
+# itself is tested on a manual clock.
+LINK_TIMEOUT_S = 3.0
+
+
 def driver_for(thread, clock=time.monotonic, **config) -> McuDriver:
-    return McuDriver(DriverConfig(thread.path, **{'link_timeout_s': 0.2, 'watchdog_s': 0.1,
-                                                   **config}), clock=clock)
+    return McuDriver(DriverConfig(thread.path, **{'link_timeout_s': LINK_TIMEOUT_S,
+                                                   'watchdog_s': 0.1, **config}), clock=clock)
 
 
 def drain(driver, quiet_s=0.1, timeout_s=5.0) -> None:
@@ -160,7 +167,7 @@ def test_only_one_driver_owns_the_port(mcu_thread):
 
 
 def test_silence_is_a_lost_link_and_the_driver_reconnects(mcu_thread):
-    driver = driver_for(mcu_thread)
+    driver = driver_for(mcu_thread, link_timeout_s=0.2)
     driver.open()
     read_until(driver, lambda s: True)
     mcu_thread.inject(FaultKind.SILENT, 0, 0.0, 0.5)
@@ -170,9 +177,9 @@ def test_silence_is_a_lost_link_and_the_driver_reconnects(mcu_thread):
             driver.read()
             driver.write(McuCommand())
             time.sleep(0.005)
-    # Not before the timeout; how long after depends on the scheduling of this process and the
-    # MCU thread (the exact timeout: the manual-clock test below).
-    assert time.monotonic() - start > 0.19
+    # No bound on the time it took: it counts from the last frame read, which under load came
+    # before `start` (0.17 s measured, two CPU hogs beside the test); the timeout itself: the
+    # manual-clock test below.
     assert driver.state is LinkState.CLOSED
     deadline = time.monotonic() + 5.0
     while True:  # the bridge's reconnection loop
@@ -188,7 +195,7 @@ def test_silence_is_a_lost_link_and_the_driver_reconnects(mcu_thread):
 def test_the_link_timeout_counts_from_the_last_valid_frame(mcu_thread):
     # On a manual clock: the frames are real (pty, MCU thread), the driver's time is the test's.
     clock = ManualClock()
-    driver = driver_for(mcu_thread, clock)
+    driver = driver_for(mcu_thread, clock, link_timeout_s=0.2)
     driver.open()
     read_until(driver, lambda s: True)
     mcu_thread.inject(FaultKind.SILENT, 0, 0.0, 60.0)
@@ -203,7 +210,7 @@ def test_the_link_timeout_counts_from_the_last_valid_frame(mcu_thread):
 
 @pytest.mark.parametrize('kind', [FaultKind.DROP_BYTES, FaultKind.CORRUPT_CRC])
 def test_damaged_frames_are_dropped_and_the_link_stays_up(mcu_thread, kind):
-    driver = driver_for(mcu_thread, link_timeout_s=0.5)
+    driver = driver_for(mcu_thread)
     driver.open()
     mcu_thread.inject(kind, 0, 0.3 if kind == FaultKind.CORRUPT_CRC else 0.01, 0.0)
     states = 0
@@ -222,14 +229,14 @@ def test_damaged_frames_are_dropped_and_the_link_stays_up(mcu_thread, kind):
 
 
 def test_the_mcu_going_away_is_a_lost_link(mcu_thread):
-    driver = driver_for(mcu_thread, link_timeout_s=1.0)
+    driver = driver_for(mcu_thread)
     driver.open()
     read_until(driver, lambda s: True)
     mcu_thread.close()  # closes both ends of the pty
     start = time.monotonic()
-    # the port's error at once, not the link timeout (1 s) some time later
+    # the port's error at once, not the link timeout some time later
     with pytest.raises(LinkError, match='Input/output error'):
-        while time.monotonic() < start + 3.0:
+        while time.monotonic() < start + LINK_TIMEOUT_S:
             driver.read()
             time.sleep(0.005)
     assert driver.state is LinkState.CLOSED

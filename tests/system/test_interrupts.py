@@ -4,7 +4,7 @@ construction, inside a callback, while it closes a bag.
 Each installed node executable is started as a real process (as the launcher starts it: stop
 signals blocked until the node owns them) and interrupted at a seeded random moment 0-3 s after
 start, several times per executable, SIGINT and SIGTERM alternately. Every run must exit with
-code 0 within 2 s of the signal, without a traceback.
+code 0 within MAX_EXIT_S of the signal, without a traceback.
 """
 
 from concurrent.futures import ThreadPoolExecutor
@@ -35,7 +35,10 @@ PACKAGES = sorted(p.name for p in REPO_ROOT.glob('inflarm_*') if (p / 'package.x
 NODE_ENTRY = re.compile(r"'(\w+) = (inflarm_\w+)\.executables:(\w+)'")
 RUNS_PER_EXECUTABLE = 6
 MAX_DELAY_S = 3.0
-MAX_EXIT_S = 2.0
+# Quiet, every stop takes under 1 s. Busy (two CPU hogs beside the test, load average 15 on the
+# 2 cores), 107 of 108 stops took 0.8-1.0 s and one 3.66 s (robot_description, SIGTERM 2.2 s
+# after start: still starting); the issue saw 3.3-3.5 s under load 6. A hang waits 30 s.
+MAX_EXIT_S = 6.0
 SEED = 20261201
 LOAD = np.array([0.0, 10.0, -15.0])
 
