@@ -274,6 +274,7 @@ def chromium():
         yield browser
 
 
+@pytest.mark.system  # a headless Chromium process loads the page
 def test_the_page_shows_the_scene_and_its_control_publishes_a_plan_request(
         ros_context, chromium):
     from rclpy.executors import SingleThreadedExecutor
