@@ -89,7 +89,7 @@ def test_a_params_file_takes_effect(node_processes, executor, tmp_path):
     assert spin_until(executor, lambda: len(received) >= 9, 30.0), node_processes.output()
     assert all(list(msg.name) == ['a', 'b'] for msg in received)
     stamps = [Time.from_msg(msg.header.stamp).nanoseconds * 1e-9 for msg in received]
-    # The median period is robust to a late timer callback on a loaded machine (two CPU hogs
+    # The median period is robust to a late timer callback on a loaded machine (three CPU hogs
     # beside the test, load average 15: median 0.1332 s, longest 0.1375 s, for 0.1333 s); the
     # default rate (50 Hz, 0.02 s) is far outside this band.
     assert 0.9 / 7.5 < np.median(np.diff(stamps)) < 1.1 / 7.5

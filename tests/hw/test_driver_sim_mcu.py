@@ -32,7 +32,7 @@ def mcu_thread(request):
 
 
 # The link timeout of the tests that are not about it: the MCU thread and the test share this
-# process, and with two CPU hogs beside the suite (load average 15) the link went quiet for up
+# process, and with three CPU hogs beside the suite (load average 15) the link went quiet for up
 # to 1.0 s (measured: 268 ms and 997 ms stalls failed 0.2 s and 0.5 s timeouts). The timeout
 # itself is tested on a manual clock.
 LINK_TIMEOUT_S = 3.0
@@ -178,7 +178,7 @@ def test_silence_is_a_lost_link_and_the_driver_reconnects(mcu_thread):
             driver.write(McuCommand())
             time.sleep(0.005)
     # No bound on the time it took: it counts from the last frame read, which under load came
-    # before `start` (0.17 s measured, two CPU hogs beside the test); the timeout itself: the
+    # before `start` (0.17 s measured, three CPU hogs beside the test); the timeout itself: the
     # manual-clock test below.
     assert driver.state is LinkState.CLOSED
     deadline = time.monotonic() + 5.0

@@ -35,8 +35,8 @@ PACKAGES = sorted(p.name for p in REPO_ROOT.glob('inflarm_*') if (p / 'package.x
 NODE_ENTRY = re.compile(r"'(\w+) = (inflarm_\w+)\.executables:(\w+)'")
 RUNS_PER_EXECUTABLE = 6
 MAX_DELAY_S = 3.0
-# The slowest of 108 stops, measured: 2.14 s beside other jobs (load average 3-4 on the 2 cores);
-# with two CPU hogs beside the test as well (load average 15), 3.66 s (robot_description,
+# The slowest of 108 stops, measured: 2.14 s beside one CPU hog and other jobs (load average
+# 3-4 on the 2 cores); beside three CPU hogs (load average 15), 3.66 s (robot_description,
 # SIGTERM 2.2 s after start: still starting), the other 107 0.8-1.0 s; the issue saw 3.3-3.5 s
 # at load 6. A hang waits 30 s.
 MAX_EXIT_S = 6.0
