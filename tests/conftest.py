@@ -4,11 +4,9 @@ Every test gets its own ROS_DOMAIN_ID; DDS stays on loopback with fast discovery
 (inflarm_bringup/config/fastdds_profile.xml). Waits are bounded waits on data, never fixed sleeps.
 """
 
-import fcntl
 import os
 import pathlib
 import sys
-import tempfile
 
 import pytest
 
@@ -20,29 +18,16 @@ from inflarm_bringup.processes import ros_environment  # noqa: E402
 # Before rclpy is imported anywhere: the same DDS environment as the launched processes.
 os.environ.update(ros_environment())
 
-from ros_harness import NodeProcesses  # noqa: E402
-
-# ROS domain ids 1-100 are taken under a file lock for the length of a test, so that test runs
-# going on at the same time on this machine (other checkouts, CI) never share a domain.
-DOMAIN_LOCKS = pathlib.Path(tempfile.gettempdir()) / 'inflarm-ros-domains'
-_next_domain = os.getpid() % 100
+from ros_harness import NodeProcesses, lock_free_domain  # noqa: E402
 
 
-def lock_free_domain():
-    """(domain id, open lock file) for the first domain no other process holds."""
-    global _next_domain
-    DOMAIN_LOCKS.mkdir(exist_ok=True)
-    for _ in range(100):
-        candidate = _next_domain % 100 + 1
-        _next_domain += 1
-        lock = open(DOMAIN_LOCKS / f'{candidate}.lock', 'w')  # noqa: SIM115 (held by the test)
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            lock.close()
-            continue
-        return candidate, lock
-    raise RuntimeError(f'every ROS domain 1-100 is in use by other test runs ({DOMAIN_LOCKS})')
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(items):
+    """A test that starts node executables (``node_processes``) is a system test, marked or not:
+    the fast lane (``-m 'not system'``) then leaves it out."""
+    for item in items:
+        if 'node_processes' in getattr(item, 'fixturenames', ()):
+            item.add_marker(pytest.mark.system)
 
 
 @pytest.fixture

@@ -1,13 +1,38 @@
 """Helpers for tests that talk to nodes over real DDS: bounded waits and node processes."""
 
 from collections.abc import Callable
+import fcntl
 import io
 import os
 import pathlib
+import tempfile
 import threading
 import time
 
 from inflarm_bringup.processes import NodeProcess, ProcessGroup
+
+# ROS domain ids 1-100 are taken under a file lock for the length of a test (or of a module's
+# fixture), so that test runs
+# going on at the same time on this machine (other checkouts, CI) never share a domain.
+DOMAIN_LOCKS = pathlib.Path(tempfile.gettempdir()) / 'inflarm-ros-domains'
+_next_domain = os.getpid() % 100
+
+
+def lock_free_domain():
+    """(domain id, open lock file) for the first domain no other process holds."""
+    global _next_domain
+    DOMAIN_LOCKS.mkdir(exist_ok=True)
+    for _ in range(100):
+        candidate = _next_domain % 100 + 1
+        _next_domain += 1
+        lock = open(DOMAIN_LOCKS / f'{candidate}.lock', 'w')  # noqa: SIM115 (held by the test)
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            continue
+        return candidate, lock
+    raise RuntimeError(f'every ROS domain 1-100 is in use by other test runs ({DOMAIN_LOCKS})')
 
 
 def spin_until(executor, predicate: Callable[[], bool], timeout_s: float = 10.0) -> bool:

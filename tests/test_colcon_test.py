@@ -12,6 +12,9 @@ import re
 import subprocess
 import sys
 
+import pytest
+
+pytestmark = pytest.mark.system
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 COLCON = pathlib.Path(sys.executable).with_name('colcon')  # the venv's, beside its python
 LIGHT_PART = 'msgs_json/test_msgs_json_messages.py'  # relative to tests/, where colcon runs pytest

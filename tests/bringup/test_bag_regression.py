@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 import yaml
@@ -27,7 +28,7 @@ from inflarm_hw.bag import BagMessage, BagWriter, bag_info, read_messages, seria
 from inflarm_msgs_json import ControlTask, TrialReport, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
-from ros_harness import spin_until
+from ros_harness import NodeProcesses, lock_free_domain, spin_until
 
 pytestmark = pytest.mark.system
 ARM_CONFIG = ('inflarm_model', 'inflatable_arm.yaml')
@@ -39,7 +40,6 @@ TARGET = (0.100, 0.110, 0.670)
 # The run's parameters that differ from the installed configs: what a user passes with
 # --params-file to replay their own run.
 RUN_PARAMETERS = {'pressure_controller': {'trial_duration_s': TRIAL_S}}
-_recording: dict[str, pathlib.Path] = {}  # the run, recorded once for this module
 
 
 def _stop(process) -> int:
@@ -116,17 +116,30 @@ def record_run(node_processes, executor, bag: pathlib.Path, params_file: pathlib
     probe.destroy_node()
 
 
-@pytest.fixture
-def recorded(node_processes, executor, tmp_path_factory):
-    """(bag, parameter file) of the simulated run, recorded by the first test that asks."""
-    if not _recording:
-        root = tmp_path_factory.mktemp('regression')
-        params_file = root / 'run_parameters.yaml'
-        params_file.write_text(yaml.safe_dump(
-            {node: {'ros__parameters': values} for node, values in RUN_PARAMETERS.items()}))
-        record_run(node_processes, executor, root / 'run', params_file)
-        _recording.update(bag=root / 'run', params_file=params_file)
-    return _recording['bag'], _recording['params_file']
+@pytest.fixture(scope='module')
+def recorded(tmp_path_factory) -> tuple[pathlib.Path, pathlib.Path]:
+    """(bag, parameter file) of the simulated run, recorded once per module whichever test
+    comes first or runs alone: on a domain, context and processes of its own, all stopped
+    (exit codes 0) before any test reads it. The tests only read the two files."""
+    root = tmp_path_factory.mktemp('regression')
+    params_file = root / 'run_parameters.yaml'
+    params_file.write_text(yaml.safe_dump(
+        {node: {'ros__parameters': values} for node, values in RUN_PARAMETERS.items()}))
+    domain, lock = lock_free_domain()
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    executor = SingleThreadedExecutor(context=context)
+    processes = NodeProcesses(domain, root)
+    try:
+        record_run(processes, executor, root / 'run', params_file)
+    finally:
+        codes = processes.stop()
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+        lock.close()
+    assert all(code == 0 for code in codes.values()), (
+        f'unclean exit codes {codes}; output:\n{processes.output()}')
+    return root / 'run', params_file
 
 
 def test_the_recorded_run_replays_within_tolerance(recorded, tmp_path, capsys):

@@ -120,6 +120,7 @@ def test_a_port_in_use_is_an_error_naming_it():
             start_server('127.0.0.1', port)
 
 
+@pytest.mark.system
 def test_the_executable_exits_1_naming_a_port_in_use(domain_id, tmp_path):
     from inflarm_bringup.processes import NodeProcess, ros_environment
     with socket.socket() as holder:
@@ -273,6 +274,7 @@ def chromium():
         yield browser
 
 
+@pytest.mark.system  # a headless Chromium process loads the page
 def test_the_page_shows_the_scene_and_its_control_publishes_a_plan_request(
         ros_context, chromium):
     from rclpy.executors import SingleThreadedExecutor

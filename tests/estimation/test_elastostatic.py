@@ -33,7 +33,6 @@ from inflarm_model.elastostatics import (
     load_hessian,
     motor_load,
     reduced_newton_matrix,
-    solve_load_newton,
     spring_deflections,
     tip_position_and_jacobian,
 )
@@ -400,10 +399,14 @@ def test_batch_bad_input_raises(arm):
         link_margins(np.array([1.0, 2.0]), -50e3, LINK_RADIUS)
 
 
-def test_core_uses_the_model_solvers_only():
-    # One implementation: the estimator's solutions are those of the model's solver.
+def test_a_single_estimate_is_the_independent_truth():
+    # The load that made the torques and the deflections of an independent forward solve
+    # (scipy on the textbook DH chain), not the model's own solver called again.
     arm = FlexibleArm()
-    q_m = np.array([0.3, 0.9, -1.4])
-    _, tau_m = forward(arm, q_m, np.array([0.0, 10.0, -15.0]))
-    np.testing.assert_array_equal(estimate_load_and_pose(arm, q_m, tau_m, K_MEAN).force,
-                                  solve_load_newton(arm, q_m, tau_m, K_MEAN).force)
+    q_m, force = np.array([0.3, 0.9, -1.4]), np.array([0.0, 10.0, -15.0])
+    q_k, tau_m = forward(arm, q_m, force)
+    estimate = estimate_load_and_pose(arm, q_m, tau_m, K_MEAN)
+    assert estimate.converged, estimate.reason
+    np.testing.assert_allclose(estimate.force, force, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(estimate.q_k, q_k, atol=1e-9, rtol=0)
+    assert_fits(arm, q_m, tau_m, estimate.force, estimate.q_k)

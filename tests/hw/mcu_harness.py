@@ -25,6 +25,19 @@ def make_mcu(plants: str = 'both', **params) -> SimMcu:
     return SimMcu(arm, sra, [50e3, 50e3], SimMcuParams(**params), rng)
 
 
+class ManualClock:
+    """A steady clock [s] that moves only when the test moves it (a driver's ``clock``)."""
+
+    def __init__(self, start_s: float = 100.0) -> None:
+        self.now_s = start_s
+
+    def __call__(self) -> float:
+        return self.now_s
+
+    def advance(self, dt_s: float) -> None:
+        self.now_s += dt_s
+
+
 class McuThread:
     """Runs ``mcu`` behind a new pty: bytes in as they come, a step every 1 / rate_hz."""
 

@@ -6,9 +6,6 @@ configurations), the vectorized numpy recursion (batches) and the per-joint 4x4 
 """
 
 import math
-import os
-import subprocess
-import sys
 import warnings
 import xml.etree.ElementTree as ET
 
@@ -557,15 +554,6 @@ def test_dh_chain_rejects_bad_description(table, names, match):
 def test_reference_rejects_bad_q():
     with pytest.raises(ValueError, match=r'expected q of shape \(7,\), got \(3,\)'):
         dh_fk_reference(flexible_dh_table(), np.zeros(3))
-
-
-def test_core_imports_without_rclpy():
-    code = (
-        'import sys, inflarm_model.kinematics, inflarm_model.urdf; '
-        "assert 'rclpy' not in sys.modules"
-    )
-    env = {**os.environ, 'PYTHONPATH': os.pathsep.join(p for p in sys.path if p)}
-    subprocess.run([sys.executable, '-c', code], check=True, timeout=60, env=env)
 
 
 # --- the installed URDF: tip, limits, masses ---------------------------------------------------

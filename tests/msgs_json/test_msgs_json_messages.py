@@ -3,12 +3,8 @@
 import copy
 import dataclasses
 import json
-import os
-from pathlib import Path
 import pickle
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -350,23 +346,6 @@ def test_error_message_shows_huge_values_briefly():
     with pytest.raises(MessageError) as error:
         decode(_obstacles_with(['frame_id'], ['x' * 10_000] * 1000))
     assert len(str(error.value)) < 200
-
-
-# --- no ROS in the core -------------------------------------------------------------------------
-
-
-def test_import_does_not_import_rclpy():
-    code = (
-        'import sys, inflarm_msgs_json, inflarm_msgs_json.schema_export; '
-        "assert 'rclpy' not in sys.modules, 'rclpy imported'"
-    )
-    # the package as imported here, whether from the source tree or an install
-    root = str(Path(inflarm_msgs_json.__file__).resolve().parents[1])
-    env = {**os.environ, 'PYTHONPATH': os.pathsep.join([root, os.environ.get('PYTHONPATH', '')])}
-    result = subprocess.run(
-        [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=60
-    )
-    assert result.returncode == 0, result.stderr
 
 
 def test_hardware_status_latched_faults_are_active_faults():

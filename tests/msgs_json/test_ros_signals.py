@@ -5,6 +5,10 @@ import os
 import subprocess
 import sys
 
+import pytest
+
+pytestmark = pytest.mark.system  # node entry points in processes of their own
+
 # A module whose import is interrupted inside a finalizer: what a C extension's callback does
 # with it (scipy's Sobol tables, seen in the interrupt stress test) is the same, an
 # "Exception ignored in ..." report instead of the exception.

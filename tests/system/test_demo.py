@@ -46,6 +46,8 @@ def test_the_main_job_meets_its_targets_and_writes_its_outputs(domain_id, tmp_pa
         assert rows[key][2] == 'yes', f'{key}: {rows[key]}\n{log}'
     error_mm = float(rows[('soft arm', 'tracking error, max (true end to the planned path)')][0]
                      .removesuffix(' mm'))
+    # The paper's figure, a user's target, not widened for load: 3.19 mm measured with three CPU
+    # hogs beside the test (load average 15 on the 2 cores).
     assert 0.0 < error_mm < 5.0  # measured, not a placeholder
     for plot in PLOTS:
         assert (out / plot).stat().st_size > 10_000, plot

@@ -4,7 +4,7 @@ construction, inside a callback, while it closes a bag.
 Each installed node executable is started as a real process (as the launcher starts it: stop
 signals blocked until the node owns them) and interrupted at a seeded random moment 0-3 s after
 start, several times per executable, SIGINT and SIGTERM alternately. Every run must exit with
-code 0 within 2 s of the signal, without a traceback.
+code 0 within MAX_EXIT_S of the signal, without a traceback.
 """
 
 from concurrent.futures import ThreadPoolExecutor
@@ -35,7 +35,11 @@ PACKAGES = sorted(p.name for p in REPO_ROOT.glob('inflarm_*') if (p / 'package.x
 NODE_ENTRY = re.compile(r"'(\w+) = (inflarm_\w+)\.executables:(\w+)'")
 RUNS_PER_EXECUTABLE = 6
 MAX_DELAY_S = 3.0
-MAX_EXIT_S = 2.0
+# The slowest of 108 stops, measured: 2.14 s beside one CPU hog and other jobs (load average
+# 3-4 on the 2 cores); beside three CPU hogs (load average 15), 3.66 s (robot_description,
+# SIGTERM 2.2 s after start: still starting), the other 107 0.8-1.0 s; the issue saw 3.3-3.5 s
+# at load 6. A hang waits 30 s.
+MAX_EXIT_S = 6.0
 SEED = 20261201
 LOAD = np.array([0.0, 10.0, -15.0])
 

@@ -1,11 +1,12 @@
 """sra_sim's simulated camera in-process: images of the ball at the true end point, camera_info,
-capture-time stamps, the latency, placement parameters."""
+capture-time stamps, the latency (on simulated time the test steps), placement parameters."""
 
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 
 from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS
@@ -26,31 +27,58 @@ def test_sra_sim_and_ball_tracker_default_to_the_same_camera_pose_and_ball():
     assert sim['camera.ball_diameter_m'] == tracker['ball_diameter_m']
 
 
+STEP_NS = 10_000_000  # the simulated clock's step: 10 ms
+
+
+def step_clock(executor, clock_pub, nodes, now_ns: int) -> None:
+    """Publish simulated time ``now_ns``, wait until every node has it, then run what is due."""
+    clock_pub.publish(Clock(clock=Time(nanoseconds=now_ns).to_msg()))
+    assert spin_until(executor, lambda: all(
+        n.get_clock().now().nanoseconds == now_ns for n in nodes), timeout_s=10.0)
+    for _ in range(10):  # the timers due at now_ns (ready by the clock, whatever the load)
+        executor.spin_once(timeout_sec=0.0)
+
+
 def test_images_show_the_ball_at_the_end_point_stamped_at_capture(executor):
+    # On simulated time (use_sim_time, /clock from the test): stamps and the latency are exact
+    # however late this process runs.
     latency = 0.15
+    sim_time = Parameter('use_sim_time', value=True)
     sim = SraSim(context=executor.context, parameter_overrides=[
-        Parameter('seed', value=7), Parameter('camera_rate_hz', value=10.0),
+        sim_time, Parameter('seed', value=7), Parameter('camera_rate_hz', value=10.0),
         Parameter('camera.latency_s', value=latency), Parameter('camera.width', value=320),
         Parameter('camera.height', value=240), Parameter('camera.focal_px', value=450.0)])
-    probe = rclpy.create_node('probe', context=executor.context)
-    images: list[tuple[Image, Time]] = []
+    probe = rclpy.create_node('probe', context=executor.context, parameter_overrides=[sim_time])
+    clock_pub = probe.create_publisher(Clock, '/clock', 10)
+    published: list[tuple[Image, Time]] = []  # each image and the simulated time it left at
+    publish = sim.camera.publish
+    sim.camera.publish = lambda image, info: (
+        published.append((image, sim.get_clock().now())), publish(image, info))
+    images: list[Image] = []
     infos: list[CameraInfo] = []
     truth: list[PointStamped] = []
-    probe.create_subscription(
-        Image, 'camera/image_raw',
-        lambda m: images.append((m, probe.get_clock().now())), SENSOR_QOS)
+    probe.create_subscription(Image, 'camera/image_raw', images.append, SENSOR_QOS)
     probe.create_subscription(CameraInfo, 'camera/camera_info', infos.append, SENSOR_QOS)
     probe.create_subscription(PointStamped, 'end_point_truth', truth.append, SENSOR_QOS)
     executor.add_node(sim)
     executor.add_node(probe)
-    assert spin_until(executor, lambda: len(images) >= 3 and infos and truth, timeout_s=15.0)
+    assert spin_until(executor, lambda: clock_pub.get_subscription_count() >= 2, timeout_s=15.0)
+    now_ns = 1_000_000_000
+    step_clock(executor, clock_pub, [sim, probe], now_ns)
+    deadline_ns = now_ns + 60_000_000_000
+    while not (len(images) >= 3 and infos and truth):
+        now_ns += STEP_NS
+        assert now_ns < deadline_ns, 'no images in 60 s of simulated time'
+        step_clock(executor, clock_pub, [sim, probe], now_ns)
 
-    msg, received = images[-1]
+    assert len(published) >= 3
+    for image, left in published:
+        # stamped with the capture time, published the latency later (on the step it fell due)
+        age_ns = (left - Time.from_msg(image.header.stamp)).nanoseconds
+        assert latency * 1e9 <= age_ns < latency * 1e9 + STEP_NS, age_ns
+    msg = images[-1]
     assert (msg.height, msg.width, msg.encoding) == (240, 320, 'bgr8')
     assert msg.header.frame_id == 'camera_optical_frame'
-    # stamped with the capture time, published the latency later
-    age = (received - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9
-    assert latency - 0.02 <= age <= latency + 1.0
     assert spin_until(executor, lambda: any(i.header.stamp == msg.header.stamp for i in infos))
     info = next(i for i in infos if i.header.stamp == msg.header.stamp)
     camera = PinholeCamera.from_camera_info(info.width, info.height, info.k, info.d,
