@@ -240,7 +240,8 @@ class LoadEstimator(GuardedCallbacks, Node):
             samples=samples, converged=converged, samples_total=self.samples_total,
             rejected_samples_total=rejected, lost_samples_total=self.lost_total,
             cold_starts_total=self.tracker.cold_starts,
-            seconds_since_sample=silent,
+            # in 0.1 s steps: what a stall needs, and the same in every replay of a recording
+            seconds_since_sample=round(silent, 1),
             statuses=dict(self.statuses) or 'none',
             last_status='none' if estimate is None else estimate.status,
             last_alternatives='none' if estimate is None else '; '.join(
