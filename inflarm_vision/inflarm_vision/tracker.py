@@ -564,20 +564,21 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     if own.sum() < 8:
         return _Pass(None, 0.0)
     inside = inside[own]
-    other = np.cross(unit, blind)
-    plane = np.stack([blind, other / np.linalg.norm(other)])  # (2, 3)
-    w2 = _fisher(inside @ plane.T, outside @ plane.T)
-    weights = (w2 @ plane).astype(np.float32)
-    inside_level = 0.0
-    separation = _separation(inside, outside, weights)
     if channel == 'luma':
         weights, inside_level = _LUMA, None
-    elif channel == 'coarse' or separation < _MIN_SEPARATION:
-        full = _fisher(inside, outside).astype(np.float32)
-        if (full_separation := _separation(inside, outside, full)) > separation:
-            weights, inside_level, separation = full, None, full_separation
-    if channel != 'luma' and separation < _ACCEPT_SEPARATION:
-        return _Pass(None, 0.0)  # nothing around it differs from it clearly enough to be its edge
+    else:
+        other = np.cross(unit, blind)
+        plane = np.stack([blind, other / np.linalg.norm(other)])  # (2, 3)
+        w2 = _fisher(inside @ plane.T, outside @ plane.T)
+        weights = (w2 @ plane).astype(np.float32)
+        inside_level = 0.0
+        separation = _separation(inside, outside, weights)
+        if channel == 'coarse' or separation < _MIN_SEPARATION:
+            full = _fisher(inside, outside).astype(np.float32)
+            if (full_separation := _separation(inside, outside, full)) > separation:
+                weights, inside_level, separation = full, None, full_separation
+        if separation < _ACCEPT_SEPARATION:
+            return _Pass(None, 0.0)  # nothing around it differs from it clearly: no edge
     signal = samples @ weights
     edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma,
                          min_contrast=_MIN_LUMA_CONTRAST if channel == 'luma' else None)
