@@ -603,10 +603,12 @@ class SafetySupervisor:
                 motor = 'no motor_position_command yet'
             elif now - self._motor_time > c.cmd_timeout_s:
                 motor = f'no motor_position_command for {c.cmd_timeout_s} s'
+            elif any(level == 'stop' for level in self._wrinkle.values()):
+                # before the fresh-command wait: held cycles drop the target, and the stop
+                # must keep holding (not zero torque) and keep naming itself
+                motor = 'wrinkle_stop: a link is below its wrinkle-safe pressure'
             elif self._motor_target is None:  # after a safe output: a fresh command resumes
                 motor = 'waiting for a fresh motor_position_command'
-            elif any(level == 'stop' for level in self._wrinkle.values()):
-                motor = 'wrinkle_stop: a link is below its wrinkle-safe pressure'
         if valve is None and self.device.n_chambers > 0:
             if self._chamber_time is None:
                 valve = 'no chamber_pressure_command yet'

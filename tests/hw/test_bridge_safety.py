@@ -251,6 +251,30 @@ def test_wrinkling_warns_then_stops_the_motion_only():
     assert bench.tick().motor_mode == MotorMode.POSITION
 
 
+def test_a_wrinkle_stop_holds_and_names_itself_until_the_link_recovers():
+    # after the first held cycle the target is dropped (a fresh command resumes); the stop must
+    # still be the reason, and still hold, when zero torque is the other faults' choice
+    bench = Bench(safe_motors='zero_torque')
+    moment = 55e3 * math.pi**2 * 0.055**3 / 4.0
+    bench.command(B1=30e3)
+    bench.move(*Q0)
+    bench.tick()
+    bench.sup.on_link_status(LinkStatus.from_moments('link_1', 50e3, 0.0, moment), bench.now)
+    for _ in range(3):
+        bench.command(B1=30e3)
+        assert bench.tick().motor_mode == MotorMode.HOLD
+        status = bench.sup.status('active', 'connected')
+        assert status.motors == 'hold' and status.reason.startswith('wrinkle_stop'), status
+    bench.sup.on_link_status(LinkStatus.from_moments('link_1', 50e3, 0.0, moment / 4.0),
+                             bench.now)
+    bench.command(B1=30e3)
+    bench.tick()
+    assert bench.sup.status('active', 'connected').reason == (
+        'waiting for a fresh motor_position_command')
+    bench.move(*Q0)
+    assert bench.tick().motor_mode == MotorMode.POSITION
+
+
 def test_link_loss_is_safe_until_the_same_mcu_is_back():
     bench = Bench()
     bench.command(B1=30e3)
