@@ -32,7 +32,7 @@ import numpy.typing as npt
 from inflarm_bringup.knowledge_cli import knowledge_plant
 from inflarm_control.knowledge import KnowledgeGrid, build_knowledge_database, holding_pressure
 from inflarm_control.path_following import PathFollower, PathFollowingParams, project_on_polyline
-from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+from inflarm_hw.sra_plant import NOISE_FREE, SoftArmPlant, SoftArmPlantParams
 from inflarm_model.alert_regions import grow_boxes, repulsive_offset
 from inflarm_planning.collision import box_array, distance_to_boxes
 from inflarm_planning.scenario import ALERT_MARGIN, GOAL, OBSTACLE, START
@@ -138,14 +138,15 @@ def feedforward_along(path: npt.ArrayLike, directory: str | Path | None = None
 
 
 def follow(path: npt.ArrayLike, feedforward: npt.ArrayLike, gain: float,
-           alert_margin: float = ALERT_MARGIN, seed: int = 7, noise_std: float = 0.5e-3
+           alert_margin: float = ALERT_MARGIN, seed: int = 7, noise: bool = True
            ) -> RepulsionRun:
     """Hold the start for `HOLD_STEPS`, then follow ``path`` with the repulsion ``gain`` from
     the obstacle's alert region of ``alert_margin`` [m], on the plant seeded with ``seed``; the
     commands reach the plant one step late."""
     path = np.asarray(path, dtype=float)
     feedforward = np.asarray(feedforward, dtype=float)
-    plant = SoftArmPlant(1, SoftArmPlantParams(noise_std=noise_std), np.random.default_rng(seed))
+    plant = SoftArmPlant(1, SoftArmPlantParams() if noise else NOISE_FREE,
+                         np.random.default_rng(seed))
     plant.reset(START)
     pending = [plant.chamber_pressures[0]]
 

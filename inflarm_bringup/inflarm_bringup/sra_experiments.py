@@ -53,7 +53,7 @@ FIG7_TARGET = (0.100, 0.110, 0.670)
 
 MEASUREMENTS = ('camera', 'plant')
 """How the end point is measured: rendered and tracked (``'camera'``), or the plant's
-`SoftArmPlant.measure` (the true end point plus its ``noise_std``)."""
+`SoftArmPlant.measure` (the true end point plus the camera's error model)."""
 
 
 class MeasuredPlant:
@@ -155,7 +155,9 @@ class SraExperiment:
     def label(self) -> str:
         """One line: how the loop was closed and on which plant."""
         how = {'camera': 'camera + ball tracker',
-               'plant': f'stand-in measurement ({self.plant.noise_std * 1e3:.1f} mm noise)',
+               'plant': (f'stand-in measurement (camera error model, '
+                         f'{self.plant.noise_center_px:.3g} / {self.plant.noise_radius_px:.3g} '
+                         f'px centre / radius)'),
                }.get(self.measurement, 'exact measurement')
         return f'{how}, valve delay {self.plant.valve_delay:.2f} s'
 
@@ -182,8 +184,9 @@ def run_experiment(
     measurement : str
         ``'camera'`` (rendered and tracked), ``'plant'`` (``plant.measure()``).
     plant_params : SoftArmPlantParams, optional
-        The simulated arm; `SoftArmPlantParams` defaults (0.1 s valve delay, 0.5 mm stand-in
-        noise) otherwise. ``IDEAL`` with ``'plant'`` is the noise-free reference.
+        The simulated arm; `SoftArmPlantParams` defaults (0.1 s valve delay, the camera's error
+        model on the stand-in measurement) otherwise. ``IDEAL`` with ``'plant'`` is the
+        noise-free reference.
     seed : int
         Seed of the noise (camera images or stand-in).
     params : PidIlcParams, optional
@@ -209,7 +212,8 @@ def run_experiment(
         for k, time in enumerate(results.times):
             metrics.add(truth[t, k], time)
         true_rmse[t], true_reach[t] = metrics.rmse[0], metrics.reach_time[0]
-    if measurement == 'plant' and plant_params.noise_std == 0.0:
+    if measurement == 'plant' and plant_params.noise_center_px == 0.0 \
+            and plant_params.noise_radius_px == 0.0:
         measurement = 'exact'
     return SraExperiment(np.array(FIG7_START), np.array(FIG7_TARGET), dt, measurement,
                          plant_params, results, true_rmse, true_reach, plant.frames,
@@ -387,17 +391,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--camera', action=argparse.BooleanOptionalAction, default=True,
                         help='close the loop through the simulated camera and the ball tracker '
                              "(default); --no-camera: the plant's stand-in measurement")
-    parser.add_argument('--noise-std', type=float, default=None,
-                        help='noise of the stand-in measurement per axis [m] (--no-camera; '
-                             "default the plant's 0.0005)")
+    parser.add_argument('--noise-px', type=float, nargs=2, default=None,
+                        metavar=('CENTER', 'RADIUS'),
+                        help="image errors behind the stand-in measurement [px] (--no-camera; "
+                             "default the plant's 0.12 0.013)")
     parser.add_argument('--valve-delay', type=float, default=None,
                         help="valve transport delay [s] (default the plant's 0.1)")
     parser.add_argument('--seed', type=int, default=7, help='noise seed (default 7)')
     args = parser.parse_args(argv)
     try:
         defaults = SoftArmPlantParams()
+        noise = ((defaults.noise_center_px, defaults.noise_radius_px) if args.noise_px is None
+                 else args.noise_px)
         plant = SoftArmPlantParams(
-            noise_std=defaults.noise_std if args.noise_std is None else args.noise_std,
+            noise_center_px=noise[0], noise_radius_px=noise[1],
             valve_delay=defaults.valve_delay if args.valve_delay is None else args.valve_delay)
         experiment = run_experiment(args.trials, args.duration,
                                     measurement='camera' if args.camera else 'plant',

@@ -103,7 +103,7 @@ class PathFollowingParams:
     ki: tuple[float, float, float] = (300e3, 300e3, 100e3)
     bellows_preload: float = 6e3
     p_max: tuple[float, float, float, float, float] = (CHAMBER_MAX_PRESSURE,) * 5
-    speed: float = 0.005
+    speed: float = 0.003
     slow_error: float = 0.0015
     stop_error: float = 0.004
     feedforward_lead: float = 0.0

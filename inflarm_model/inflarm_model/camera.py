@@ -44,6 +44,7 @@ __all__ = [
     'project_points',
     'sphere_coverage',
     'sphere_image',
+    'sphere_position_std',
     'undistort_pixels',
 ]
 
@@ -473,3 +474,46 @@ def sphere_coverage(camera: PinholeCamera, center: npt.ArrayLike, radius: float,
         hit = (d > 0.0) & (d * d >= cos2 * (x * x + y * y + 1.0))
         coverage[rows, cols] = hit.mean(axis=(1, 2))
     return SphereCoverage(u0=u0, v0=v0, coverage=coverage, undistorted=inner)
+
+
+def sphere_position_std(
+    distance: npt.ArrayLike, radius: float, focal_px: float, center_px_std: float,
+    radius_px_std: float,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Spread of a sphere's centre located from one image: across and along the line of sight.
+
+    The image of a sphere of radius ``R`` at distance ``D`` is (on the optical axis) a circle of
+    radius ``r = f tan(a)``, ``sin(a) = R / D`` (module docstring), so
+    ``D = R sqrt(f^2 + r^2) / r`` and a radius error ``dr`` moves the centre along the line of
+    sight by ``|dD/dr| dr = R f^2 / (r^2 sqrt(f^2 + r^2)) dr``, while a centre error ``du``
+    moves it across by ``D du / f``: depth is the noisy direction of a monocular measurement.
+
+    Parameters
+    ----------
+    distance : array-like, any shape
+        ``D``, distance from the projection centre to the sphere's centre [m], > ``radius``.
+    radius : float
+        ``R``, sphere radius [m], > 0.
+    focal_px : float
+        ``f``, focal length [px], > 0.
+    center_px_std, radius_px_std : float
+        Standard deviations of the image centre (per image axis) and of the image radius [px].
+
+    Returns
+    -------
+    lateral, depth : ndarray, shape of ``distance``
+        Standard deviations across (per axis) and along the line of sight [m].
+    """
+    d = np.asarray(distance, dtype=float)
+    if not (math.isfinite(radius) and radius > 0.0):
+        raise ValueError(f'expected radius > 0 m, got {radius}')
+    if not (math.isfinite(focal_px) and focal_px > 0.0):
+        raise ValueError(f'expected focal_px > 0, got {focal_px}')
+    if not (np.all(np.isfinite(d)) and np.all(d > radius)):
+        raise ValueError(f'expected finite distance > radius = {radius} m')
+    for name, value in (('center_px_std', center_px_std), ('radius_px_std', radius_px_std)):
+        if not (math.isfinite(value) and value >= 0.0):
+            raise ValueError(f'expected {name} >= 0 px, got {value}')
+    r = focal_px * radius / np.sqrt(d * d - radius * radius)  # f tan(a)
+    depth = radius * focal_px ** 2 / (r * r * np.sqrt(focal_px ** 2 + r * r)) * radius_px_std
+    return d * center_px_std / focal_px, depth

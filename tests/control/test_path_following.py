@@ -63,7 +63,7 @@ def test_a_preloaded_trial_holds_a_point_on_the_axis_that_the_quadrant_rule_cann
     target = np.array(START)
     errors = {}
     for preload in (0.0, 6e3):
-        plant = SoftArmPlant(1, SoftArmPlantParams(noise_std=0.5e-3), np.random.default_rng(7))
+        plant = SoftArmPlant(1, SoftArmPlantParams(), np.random.default_rng(7))
         plant.reset(target)
         controller = PidIlcController(1, PidIlcParams(bellows_preload=preload))
         controller.start_trial(target, target, initial_output=plant.chamber_pressures)
@@ -229,7 +229,7 @@ def follow_scenario(path, feedforward, seed):
     """Hold the start (a one-waypoint path, 20 s), then follow the path, as the demo does; the
     commands reach the plant ``DELAY_STEPS`` steps late (the loop's latency). Returns the true
     end points while following and the time taken [s]."""
-    plant = SoftArmPlant(1, SoftArmPlantParams(noise_std=0.5e-3), np.random.default_rng(seed))
+    plant = SoftArmPlant(1, SoftArmPlantParams(), np.random.default_rng(seed))
     plant.reset(START)
     params = PathFollowingParams()
     pending = [plant.chamber_pressures[0]] * DELAY_STEPS
@@ -263,11 +263,10 @@ def test_the_scenario_path_is_followed_within_5_mm(knowledge, scenario_path, see
     truth, duration = follow_scenario(scenario_path, feedforward, seed)
     error = project_on_polyline(truth, scenario_path)[0]
     assert np.linalg.norm(truth[-1] - scenario_path[-1]) < 0.002, truth[-1]
-    # 3.0-3.1 mm here (2.6-2.9 mm without the repulsion); the demo adds the camera's error to
-    # this, under the paper's 5 mm
-    assert error.max() < 0.0035, (error.max(), truth[np.argmax(error)])
+    # the paper's 5 mm (measured: 3.0-3.4 mm; 5.1-6.0 mm with the reference at 5 mm/s)
+    assert error.max() < 0.005, (error.max(), truth[np.argmax(error)])
     assert np.sqrt(np.mean(error**2)) < 0.002
-    assert duration < 110.0  # the planner's 50 s at 5 mm/s, slowed where the arm lags
+    assert duration < 110.0  # measured 90-91 s: the path at 3 mm/s, slowed where the arm lags
 
 
 def test_without_a_database_the_pi_alone_follows_within_5_mm(scenario_path):

@@ -175,7 +175,9 @@ def test_over_pressure_and_frozen_sensors_vent_and_latch_until_reset(
     rig.pressures, rig.motors = {'B1': 20e3}, Q0
     rig.wait_status(lambda s: s.valves == 'follow' and s.motors == 'follow', 20.0)
 
-    rig.inject('over_pressure', 1, 160e3, 1.5)  # B1's valve delivers 160 kPa whatever it gets
+    # B1's valve delivers 160 kPa whatever it gets, long enough for the bellows (its volume
+    # growing as it stretches) to pass 130 kPa (~3.3 s)
+    rig.inject('over_pressure', 1, 160e3, 5.0)
     assert rig.run(lambda: rig.chamber('B1') > 130e3 or 'over_pressure' in (
         rig.status.faults), 10.0)
     crossed = time.monotonic()

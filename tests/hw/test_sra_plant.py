@@ -7,6 +7,7 @@ import pytest
 
 from inflarm_hw.sra_plant import IDEAL, NOISE_FREE, SoftArmPlant, SoftArmPlantParams
 from inflarm_hw.valve import ITV2050, pressure_to_voltage
+from inflarm_model.camera import sphere_position_std
 from inflarm_model.soft_arm import CHAMBERS, quadrant_of
 
 PEA, B1, B2, B3, B4 = (CHAMBERS.index(c) for c in CHAMBERS)
@@ -115,11 +116,12 @@ def test_constant_pressures_settle_near_the_static_point():
     plant = SoftArmPlant(20)
     pressures = plant.holding_pressures(points)
     _hold(plant, pressures, 20.0)
-    # within the hysteresis band: 2 x play on z, bend play times the arm length laterally
+    # within the hysteresis band: the play on both PEAs in z, the bellows' play (as tilt)
+    # times the arm's length laterally
     p = plant.params
     error = np.abs(plant.end_point - points)
-    assert np.all(error[:, 2] <= 2 * p.extension_play + 0.5e-3)
-    assert np.all(error[:, :2] <= 0.5 * p.bend_play + 0.5e-3)
+    assert np.all(error[:, 2] <= 2 * p.pea_play * p.pea_rest_length + 0.5e-3)
+    assert np.all(error[:, :2] <= 0.7 * p.bellows_play + 0.5e-3)
 
 
 @pytest.mark.parametrize(('pair', 'quadrant'), [
@@ -147,7 +149,7 @@ def test_bending_lowers_z():
     command = np.array([_command(PEA=20), _command(PEA=20, B3=30, B4=30)])
     _hold(plant, command, 10.0)
     straight, bent = plant.end_point
-    assert bent[2] < straight[2] - 0.02
+    assert bent[2] < straight[2] - 0.01
 
 
 def _time_to_63_percent(chamber):
@@ -164,8 +166,11 @@ def _time_to_63_percent(chamber):
 def test_pea_chamber_is_slow_and_bellows_fast():
     t_pea = _time_to_63_percent(PEA)
     t_bellows = _time_to_63_percent(B3)
-    assert 1.0 <= t_pea <= 2.0
-    assert 0.2 <= t_bellows <= 0.4
+    # pneumatic time constant growing with the volume, plus the walls' creep and the gas's
+    # expansion as they stretch
+    assert 1.4 <= t_pea <= 2.0
+    assert 0.4 <= t_bellows <= 0.8
+    assert t_pea > 2.0 * t_bellows
 
 
 def test_result_does_not_depend_on_the_step_size():
@@ -231,7 +236,7 @@ def test_long_steps_stay_stable():
         plant.step(_command(PEA=100, B4=100), 2.0)
     assert np.all(np.isfinite(plant.end_point))
     assert plant.end_point[0, 2] < 1.0
-    np.testing.assert_allclose(plant.chamber_pressures[0, [PEA, B4]], 100e3, rtol=1e-6)
+    np.testing.assert_allclose(plant.chamber_pressures[0, [PEA, B4]], 100e3, rtol=1e-4)
 
 
 def test_hysteresis_separates_rising_and_falling_branches():
@@ -240,9 +245,9 @@ def test_hysteresis_separates_rising_and_falling_branches():
     _hold(falling, _command(PEA=40), 20.0)
     _hold(falling, _command(PEA=15), 20.0)
     gap = falling.end_point[0, 2] - rising.end_point[0, 2]
-    play = rising.params.extension_play
+    play = rising.params.pea_play * rising.params.pea_rest_length  # [m] per PEA
     # the PEA pair doubles the axial play: the branches are 2 x 2 x play apart in z
-    assert 2.0 * play < gap <= 4.0 * play + 1e-6
+    assert 2.0 * play < gap <= 4.0 * play + 2e-5  # + the creep left after 20 s
 
 
 def test_arms_are_independent_and_match_single_arm_runs():
@@ -256,11 +261,27 @@ def test_arms_are_independent_and_match_single_arm_runs():
         np.testing.assert_allclose(batch.end_point[i], single.end_point[0], rtol=1e-12)
 
 
-def test_measurement_noise_is_on_by_default_with_the_configured_spread():
-    plant = SoftArmPlant(4000, rng=np.random.default_rng(7))
-    assert plant.params.noise_std == 0.5e-3  # the documented default
+def test_measurement_noise_follows_the_camera_geometry():
+    """Noise across the camera's line of sight from the image centre's error, larger noise
+    along it from the image radius' error (`sphere_position_std`), at the camera's distance."""
+    plant = SoftArmPlant(20000, rng=np.random.default_rng(7))
+    p = plant.params
+    assert (p.noise_center_px, p.noise_radius_px) == (0.12, 0.013)  # the documented defaults
     error = plant.measure() - plant.end_point
-    np.testing.assert_allclose(error.std(axis=0), 0.5e-3, rtol=0.05)
+    ray = plant.end_point[0] - np.asarray(p.camera.translation_m)
+    distance = np.linalg.norm(ray)
+    ray /= distance
+    lateral, depth = sphere_position_std(distance, 0.5 * p.camera.ball_diameter_m,
+                                         p.camera.focal_px, 0.12, 0.013)
+    along = error @ ray
+    across = error - along[:, None] * ray
+    np.testing.assert_allclose(along.std(), depth, rtol=0.03)
+    np.testing.assert_allclose(np.sqrt((across ** 2).sum(axis=1).mean() / 2.0), lateral,
+                               rtol=0.03)
+    assert depth > 5.0 * lateral
+    # the camera (0, -1.1, 0.78) looks along +y: the straight arm's y is the noisy axis, its
+    # median error within sra_sim's camera + tracker's (0.73 mm in depth, 1.1-1.2 m away)
+    assert 0.5e-3 < np.median(np.abs(error[:, 1])) < 0.8e-3
     np.testing.assert_allclose(error.mean(axis=0), 0.0, atol=3e-5)
     exact = SoftArmPlant(2, NOISE_FREE)
     np.testing.assert_array_equal(exact.measure(), exact.end_point)
@@ -284,15 +305,17 @@ def test_bad_input_is_rejected(call, message):
 def test_new_params_take_effect_and_keep_the_state():
     plant = SoftArmPlant()
     _hold(plant, _command(PEA=20, B4=20), 3.0)
-    before = plant.end_point
-    plant.params = dataclasses.replace(plant.params, bend_skew=0.3, noise_std=1e-3)
-    np.testing.assert_allclose(plant.end_point, before)
+    pressures, stretches = plant.chamber_pressures, plant.stretches
+    plant.params = dataclasses.replace(plant.params, bend_skew=0.3, noise_radius_px=0.05)
+    # the state (pressures, walls) is kept; the geometry is the new one at once
+    np.testing.assert_array_equal(plant.chamber_pressures, pressures)
+    np.testing.assert_array_equal(plant.stretches, stretches)
     _hold(plant, _command(PEA=20, B4=20), 10.0)
-    # the bend of B4 alone now points 0.3 rad off +x (within the play of the old bend)
+    # the bend of B4 alone now points 0.3 rad off +x
     x, y, _ = plant.end_point[0]
     assert np.arctan2(y, x) == pytest.approx(0.3, abs=0.05)
     with pytest.raises(ValueError, match='SoftArmPlantParams'):
-        plant.params = {'noise_std': 0.0}
+        plant.params = {'noise_radius_px': 0.0}
 
 
 def test_bad_construction_is_rejected():
@@ -300,7 +323,9 @@ def test_bad_construction_is_rejected():
         SoftArmPlant(0)
     with pytest.raises(ValueError, match='pea_time_constant > 0'):
         SoftArmPlantParams(pea_time_constant=0.0)
-    with pytest.raises(ValueError, match='finite extension_play'):
-        SoftArmPlantParams(extension_play=np.nan)
+    with pytest.raises(ValueError, match='finite pea_play'):
+        SoftArmPlantParams(pea_play=np.nan)
+    with pytest.raises(ValueError, match='camera a SraCamera'):
+        SoftArmPlantParams(camera=None)
     with pytest.raises(ValueError, match='valve_delay >= 0'):
         SoftArmPlantParams(valve_delay=-0.1)

@@ -1,7 +1,9 @@
 """sra_sim in-process: commands within the chamber limits, rejection of bad ones, the vent."""
 
 import numpy as np
+import pytest
 import rclpy
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
@@ -64,3 +66,24 @@ def test_a_silent_controller_gets_the_chambers_vented_and_the_timeout_stays_safe
     assert spin_until(executor, lambda: rig.sim.command[0] == 30e3)
     assert spin_until(executor, lambda: rig.sim.vented and rig.sim.command[0] == 0.0,
                       timeout_s=3.0)
+
+
+def test_an_out_of_range_measurement_noise_refuses_to_start_naming_it(ros_context):
+    with pytest.raises(InvalidParameterValueException, match='measurement_noise.radius_px'):
+        SraSim(context=ros_context, parameter_overrides=[
+            Parameter('measurement_noise.radius_px', value=2.0)])
+
+
+def test_the_stand_in_measurement_uses_the_camera_geometry(executor):
+    rig = Rig(executor, **{'measurement_noise.center_px': 0.0,
+                           'measurement_noise.radius_px': 0.5, 'camera.enabled': False})
+    plant = rig.sim.plant
+    assert plant.params.noise_radius_px == 0.5 and plant.params.noise_center_px == 0.0
+    error = np.array([plant.measure()[0] - plant.end_point[0] for _ in range(200)])
+    # the default camera looks along +y: all the noise is along y (the depth)
+    assert np.abs(error[:, 1]).mean() > 10.0 * np.abs(error[:, [0, 2]]).mean()
+    refused = rig.sim.set_parameters([Parameter('measurement_noise.center_px', value=-1.0)])[0]
+    assert not refused.successful
+    assert rig.sim.set_parameters([Parameter('measurement_noise.center_px', value=0.2)])[0] \
+        .successful
+    assert plant.params.noise_center_px == 0.2

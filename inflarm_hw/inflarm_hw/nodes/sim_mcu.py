@@ -15,8 +15,10 @@ Publishes:
     spring_states_truth (sensor_msgs/JointState, SENSOR_QOS): true spring deflections [rad]
         and torques [N m].
     end_point_truth (geometry_msgs/PointStamped, SENSOR_QOS): true soft-arm end point [m].
-    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the true end point plus
-        ``measurement_noise_m`` of noise, a stand-in for camera + tracker, only when
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the true end point plus the
+        camera's error (`inflarm_hw.sra_plant.SoftArmPlant.measure`: ``measurement_noise.*``
+        of the ball's image, through the ``camera.*`` geometry), a stand-in for camera +
+        tracker, only when
         ``publish_ball_position`` is true (default false, as for ``sra_sim``).
     camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
         SENSOR_QOS: the simulated camera's view of the yellow ball at the soft arm's true end
@@ -36,8 +38,9 @@ Parameters:
         initial_motor_positions_rad, motor.*, noise.position_rad, noise.effort_nm,
         wrinkling: the inflatable arm, as for arm_sim.
     noise.pressure_pa (double, read-only): pressure sensor noise.
-    measurement_noise_m, camera_rate_hz, truth_rate_hz, publish_ball_position (default
-        false): the stand-in measurement, the camera rate and the truth topics.
+    measurement_noise.center_px, measurement_noise.radius_px, camera_rate_hz, truth_rate_hz,
+        publish_ball_position (default false): the stand-in measurement's image errors [px],
+        the camera rate and the truth topics.
     valve_delay_s (double, read-only): the soft arm's valve transport delay [s].
     camera.* : the simulated camera, as for ``sra_sim`` (camera.transport, raw or
         compressed, and camera.jpeg_quality among them).
@@ -57,7 +60,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from inflarm_hw.mcu_protocol import PROTOCOL_VERSION, FaultKind
-from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
+from inflarm_hw.nodes.camera_publisher import (
+    CAMERA_PARAMETERS,
+    CameraPublisher,
+    camera_from_parameters,
+)
 from inflarm_hw.nodes.plant_parameters import (
     ARM_PLANT_PARAMETERS,
     apply_arm_plant_parameter,
@@ -91,9 +98,12 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
               range=(0.02, 2.0), read_only=True),
     Parameter('noise.pressure_pa', 20.0, 'pressure sensor noise (std) [Pa]',
               range=(0.0, 10000.0), read_only=True),
-    Parameter('measurement_noise_m', _SRA.noise_std,
-              'noise per axis of the stand-in ball_position [m]', range=(0.0, 0.05),
-              read_only=True),
+    Parameter('measurement_noise.center_px', _SRA.noise_center_px,
+              "std of the ball image's centre behind the stand-in ball_position [px]",
+              range=(0.0, 5.0), read_only=True),
+    Parameter('measurement_noise.radius_px', _SRA.noise_radius_px,
+              "std of the ball image's radius behind the stand-in ball_position [px]",
+              range=(0.0, 1.0), read_only=True),
     Parameter('valve_delay_s', _SRA.valve_delay,
               "transport delay from a command to the soft arm's valve outputs [s]",
               range=(0.0, 2.0), read_only=True),
@@ -141,8 +151,10 @@ class SimMcuNode(GuardedCallbacks, Node):
         if p['plant'] in ('arm', 'both'):
             arm = arm_plant_from_parameters(p, rng)
         if p['plant'] in ('sra', 'both'):
-            sra = SoftArmPlant(1, SoftArmPlantParams(noise_std=p['measurement_noise_m'],
-                                                     valve_delay=p['valve_delay_s']), rng)
+            sra = SoftArmPlant(1, SoftArmPlantParams(
+                noise_center_px=p['measurement_noise.center_px'],
+                noise_radius_px=p['measurement_noise.radius_px'],
+                valve_delay=p['valve_delay_s'], camera=camera_from_parameters(p)), rng)
         self.mcu = SimMcu(arm, sra, p['arm.link_pressure_pa'], SimMcuParams(
             protocol_version=p['protocol_version'], default_watchdog_s=p['watchdog_default_s'],
             pressure_noise_pa=p['noise.pressure_pa']), rng)

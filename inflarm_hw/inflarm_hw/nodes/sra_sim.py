@@ -6,8 +6,10 @@ Subscribes:
 Publishes:
     chamber_pressures (std_msgs/String: ChamberPressures JSON, RELIABLE_QOS): measured [Pa].
     end_point_truth (geometry_msgs/PointStamped, SENSOR_QOS): true end point [m], for evaluation.
-    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the true end point plus
-        ``measurement_noise_m`` of noise, a stand-in for camera + tracker, only when
+    ball_position (geometry_msgs/PointStamped, SENSOR_QOS): the true end point plus the
+        camera's error (`inflarm_hw.sra_plant.SoftArmPlant.measure`: ``measurement_noise.*``
+        of the ball's image, through the ``camera.*`` geometry), a stand-in for camera +
+        tracker, only when
         ``publish_ball_position`` is true (default false: ``ball_tracker`` measures the ball
         in the camera images).
     camera/image_raw (sensor_msgs/Image, bgr8), camera/camera_info (sensor_msgs/CameraInfo),
@@ -22,7 +24,9 @@ Parameters:
         (``inflarm_hw.realtime``), so simulated time keeps pace with the controller's.
     publish_ball_position (bool, read-only): publish the stand-in measurement on
         ``ball_position`` (default false).
-    measurement_noise_m (double): its noise per axis [m].
+    measurement_noise.center_px, measurement_noise.radius_px (double): the image errors behind
+        it [px] (`inflarm_hw.sra_plant.SoftArmPlantParams`): depth noise along the camera's line
+        of sight larger than across it.
     valve_delay_s (double, read-only): transport delay from a command to the valve outputs
         [s] (`inflarm_hw.sra_plant.SoftArmPlantParams.valve_delay`).
     cmd_timeout_s (double, 0.05-5): without a command for this long the MCU vents every chamber.
@@ -42,7 +46,11 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
+from inflarm_hw.nodes.camera_publisher import (
+    CAMERA_PARAMETERS,
+    CameraPublisher,
+    camera_from_parameters,
+)
 from inflarm_hw.realtime import ElapsedSteps
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
@@ -64,8 +72,12 @@ PARAMETERS = (
     Parameter('publish_ball_position', False,
               'publish the true end point plus noise on ball_position (a stand-in for the '
               'camera and ball_tracker)', read_only=True),
-    Parameter('measurement_noise_m', _PLANT.noise_std,
-              'noise per axis of the stand-in ball_position [m]', range=(0.0, 0.05)),
+    Parameter('measurement_noise.center_px', _PLANT.noise_center_px,
+              "std of the ball image's centre behind the stand-in ball_position [px]",
+              range=(0.0, 5.0)),
+    Parameter('measurement_noise.radius_px', _PLANT.noise_radius_px,
+              "std of the ball image's radius behind the stand-in ball_position [px]",
+              range=(0.0, 1.0)),
     Parameter('valve_delay_s', _PLANT.valve_delay,
               'transport delay from a command to the valve outputs [s]', range=(0.0, 2.0),
               read_only=True),
@@ -87,8 +99,11 @@ class SraSim(GuardedCallbacks, Node):
         self.params = declare_parameters(self, PARAMETERS)
         seed = self.params['seed']
         self.plant = SoftArmPlant(
-            n=1, params=SoftArmPlantParams(noise_std=self.params['measurement_noise_m'],
-                                           valve_delay=self.params['valve_delay_s']),
+            n=1, params=SoftArmPlantParams(
+                noise_center_px=self.params['measurement_noise.center_px'],
+                noise_radius_px=self.params['measurement_noise.radius_px'],
+                valve_delay=self.params['valve_delay_s'],
+                camera=camera_from_parameters(self.params)),
             rng=np.random.default_rng(None if seed < 0 else seed))
         self.command = np.zeros(len(CHAMBERS))
         self.last_command_time = time.monotonic()
@@ -123,9 +138,11 @@ class SraSim(GuardedCallbacks, Node):
     def on_parameters_set(self, parameters) -> None:
         for parameter in parameters:
             self.params[parameter.name] = parameter.value
-            if parameter.name == 'measurement_noise_m':
+            if parameter.name.startswith('measurement_noise.'):
+                field = {'measurement_noise.center_px': 'noise_center_px',
+                         'measurement_noise.radius_px': 'noise_radius_px'}[parameter.name]
                 self.plant.params = dataclasses.replace(self.plant.params,
-                                                        noise_std=parameter.value)
+                                                        **{field: parameter.value})
 
     def on_command(self, msg: String) -> None:
         command = check_chamber_pressures(
