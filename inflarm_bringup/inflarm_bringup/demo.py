@@ -67,6 +67,7 @@ TASK_RETRY_S = 2.0  # the task to the start is sent again after this long withou
 NEAR_START_M = 0.015  # the trial to the start hands over to path following this close
 AT_START_M = 0.004  # the path to the goal starts once the measured end is this close,
 SETTLE_S = 2.0  # on average over this long (its depth is noisy), and none of it twice as far
+SETTLE_DRIFT_M = 0.001  # and at rest: the means of its halves this close (the PEA creeps)
 ARRIVAL_TOLERANCE_M = 0.004  # at the goal when the measured end is this close
 TRACKING_TARGET_M = 0.005  # the paper: "an error smaller than 5 mm"
 ARM_LOAD_N = (0.0, 10.0, -15.0)  # the sample load of section 4 of 000 [N], base frame
@@ -303,16 +304,23 @@ def mission_node_class():
 
         def settled_at(self, point) -> bool:
             """Whether the measured end has rested at ``point`` for the last `SETTLE_S` of
-            this phase: its mean within `AT_START_M`, no sample twice as far. (One sample near
-            it is not enough: switching to the path follower's bellows preload first moves the
-            end by up to 15 mm, and a path begun then starts with that error.)"""
+            this phase: its mean within `AT_START_M`, no sample twice as far, and the means of
+            the window's halves within `SETTLE_DRIFT_M`. (One sample near it is not enough:
+            switching to the path follower's bellows preload first moves the end by up to
+            15 mm, and a path begun then starts with that error; nor is a mean alone: an end
+            swinging through the point at 7 mm/s passed it, and the path began 11 mm off.)"""
             now = self.now()
             if now - self.soft_times[self.soft_phase] < SETTLE_S:
                 return False
             _, recent = self.ball.arrays(now - SETTLE_S)
+            if len(recent) < 4:
+                return False
             offsets = np.linalg.norm(recent - np.asarray(point), axis=1)
-            return bool(len(recent) and np.linalg.norm(recent.mean(axis=0) - point) < AT_START_M
-                        and offsets.max() < 2.0 * AT_START_M)
+            first, second = np.array_split(recent, 2)
+            return bool(np.linalg.norm(recent.mean(axis=0) - point) < AT_START_M
+                        and offsets.max() < 2.0 * AT_START_M
+                        and np.linalg.norm(second.mean(axis=0) - first.mean(axis=0))
+                        < SETTLE_DRIFT_M)
 
         def request_plan(self, start, goal) -> None:
             self.request_pub.publish(self.to_string_msg(self.PlanRequest(
