@@ -105,6 +105,15 @@ def wall_pressure(stretch: npt.ArrayLike, modulus: npt.ArrayLike) -> npt.NDArray
     return modulus * (lam - lam ** -2)
 
 
+class PlantParameterError(ValueError):
+    """A `SoftArmPlantParams` field out of its range; ``field`` names it (a node maps it to the
+    ROS parameter it came from)."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+
+
 @dataclass(frozen=True)
 class SoftArmPlantParams:
     """Constants of the simulated SRA, each identified from the paper or chosen (with why).
@@ -219,26 +228,30 @@ class SoftArmPlantParams:
 
     def __post_init__(self) -> None:
         if not isinstance(self.valve, ValveModel):
-            raise ValueError(f'expected valve a ValveModel, got {type(self.valve).__name__}')
+            raise PlantParameterError(
+                'valve', f'expected valve a ValveModel, got {type(self.valve).__name__}')
         if not isinstance(self.camera, SraCamera):
-            raise ValueError(f'expected camera a SraCamera, got {type(self.camera).__name__}')
+            raise PlantParameterError(
+                'camera', f'expected camera a SraCamera, got {type(self.camera).__name__}')
         for name, value in vars(self).items():
             if name not in ('valve', 'camera') and not np.isfinite(value):
-                raise ValueError(f'expected finite {name}, got {value}')
+                raise PlantParameterError(name, f'expected finite {name}, got {value}')
         positive = (
             'pba_length', 'pea_rest_length', 'pea_modulus', 'bellows_modulus', 'bellows_lever',
             'bend_limit', 'stroke_sharpness', 'y_bend_ratio', 'pea_time_constant',
             'bellows_time_constant', 'pea_creep_time', 'bellows_creep_time', 'max_substep')
         for name in positive:
             if getattr(self, name) <= 0.0:
-                raise ValueError(f'expected {name} > 0, got {getattr(self, name)}')
+                raise PlantParameterError(name, f'expected {name} > 0, got {getattr(self, name)}')
         non_negative = ('gravity_moment', 'pea_play', 'bellows_play', 'valve_delay',
                         'noise_center_px', 'noise_radius_px')
         for name in non_negative:
             if getattr(self, name) < 0.0:
-                raise ValueError(f'expected {name} >= 0, got {getattr(self, name)}')
+                raise PlantParameterError(
+                    name, f'expected {name} >= 0, got {getattr(self, name)}')
         if self.bend_limit >= 0.5 * np.pi:
-            raise ValueError(f'expected bend_limit < pi / 2 rad, got {self.bend_limit}')
+            raise PlantParameterError(
+                'bend_limit', f'expected bend_limit < pi / 2 rad, got {self.bend_limit}')
 
 
 NOISE_FREE = SoftArmPlantParams(noise_center_px=0.0, noise_radius_px=0.0)
