@@ -254,6 +254,34 @@ class SoftArmPlantParams:
                 'bend_limit', f'expected bend_limit < pi / 2 rad, got {self.bend_limit}')
 
 
+# physical SoftArmPlantParams field, unit suffix of its ROS parameter ('' if unitless), description
+_PLANT_FIELDS = (
+    ('pba_length', 'm', 'length of the PBA between its plates [m]'),
+    ('pea_rest_length', 'm', 'length of PEA1 (= PEA2) at 0 Pa [m]'),
+    ('pea_modulus', 'pa', 'stiffness mu of the PEA wall, as a pressure [Pa]'),
+    ('bellows_modulus', 'pa', 'stiffness mu of a bellows wall, as a pressure [Pa]'),
+    ('bellows_lever', 'm', "distance of each bellows' axis from the PBA's axis [m]"),
+    ('bend_limit', 'rad', "tilt the bellows' folds allow (stroke limit) [rad]"),
+    ('stroke_sharpness', '', 'sharpness k of the stroke limit [-]'),
+    ('gravity_moment', '', 'weight moment of PEA2 and the end over the PBA stiffness [-]'),
+    ('y_bend_ratio', '', 'tilt about x per bellows stretch relative to the x tilt [-]'),
+    ('bend_skew', 'rad', 'rotation of the bend vector about +z [rad]'),
+    ('pea_time_constant', 's', 'pneumatic time constant of PEA1&2 at rest volume [s]'),
+    ('bellows_time_constant', 's', 'pneumatic time constant of a bellows at rest volume [s]'),
+    ('pea_creep_time', 's', 'creep time of the PEA wall at small strain [s]'),
+    ('bellows_creep_time', 's', 'creep time of a bellows wall at small strain [s]'),
+    ('pea_play', '', 'half-width of the play operator on the PEA stretch [-]'),
+    ('bellows_play', '', 'half-width of the play operator on a bellows stretch [-]'),
+    ('valve_delay', 's', 'transport delay from a command to the valve outputs [s]'),
+    ('max_substep', 's', 'largest internal integration step [s]'),
+)
+PLANT_PARAMETER_NAMES = {
+    field: f"plant.{field}{'_' + unit if unit else ''}" for field, unit, _ in _PLANT_FIELDS}
+"""ROS parameter of each physical `SoftArmPlantParams` field (``plant.*``, unit-suffixed): the
+names under which ``sra_sim`` takes them and ``inflarm-identify-plant`` writes them."""
+PLANT_PARAMETER_DESCRIPTIONS = {field: description for field, _, description in _PLANT_FIELDS}
+"""Description of each field in `PLANT_PARAMETER_NAMES`, with its unit."""
+
 NOISE_FREE = SoftArmPlantParams(noise_center_px=0.0, noise_radius_px=0.0)
 """The default plant (valve delay included) with exact measurements: deterministic trials."""
 

@@ -7,8 +7,8 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from inflarm_hw.nodes.sra_sim import PLANT_PARAMETER_NAMES, SraSim
-from inflarm_hw.sra_plant import SoftArmPlantParams
+from inflarm_hw.nodes.sra_sim import SraSim
+from inflarm_hw.sra_plant import PLANT_PARAMETER_NAMES, SoftArmPlantParams
 from inflarm_msgs_json import ChamberPressures, PressureCommand, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS

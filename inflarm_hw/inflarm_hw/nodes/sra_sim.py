@@ -56,7 +56,13 @@ from inflarm_hw.nodes.camera_publisher import (
     camera_from_parameters,
 )
 from inflarm_hw.realtime import ElapsedSteps
-from inflarm_hw.sra_plant import PlantParameterError, SoftArmPlant, SoftArmPlantParams
+from inflarm_hw.sra_plant import (
+    PLANT_PARAMETER_DESCRIPTIONS,
+    PLANT_PARAMETER_NAMES,
+    PlantParameterError,
+    SoftArmPlant,
+    SoftArmPlantParams,
+)
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
 from inflarm_msgs_json import ChamberPressures, PressureCommand
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
@@ -66,38 +72,14 @@ from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS, pub
 from inflarm_msgs_json.ros.spin import spin_node
 
 _PLANT = SoftArmPlantParams()
-# SoftArmPlantParams field -> unit suffix of its ROS parameter ('' when unitless), description
-_PLANT_FIELDS = (
-    ('pba_length', 'm', 'length of the PBA between its plates [m]'),
-    ('pea_rest_length', 'm', 'length of PEA1 (= PEA2) at 0 Pa [m]'),
-    ('pea_modulus', 'pa', 'stiffness mu of the PEA wall, as a pressure [Pa]'),
-    ('bellows_modulus', 'pa', 'stiffness mu of a bellows wall, as a pressure [Pa]'),
-    ('bellows_lever', 'm', "distance of each bellows' axis from the PBA's axis [m]"),
-    ('bend_limit', 'rad', "tilt the bellows' folds allow (stroke limit) [rad]"),
-    ('stroke_sharpness', '', 'sharpness k of the stroke limit [-]'),
-    ('gravity_moment', '', 'weight moment of PEA2 and the end over the PBA stiffness [-]'),
-    ('y_bend_ratio', '', 'tilt about x per bellows stretch relative to the x tilt [-]'),
-    ('bend_skew', 'rad', 'rotation of the bend vector about +z [rad]'),
-    ('pea_time_constant', 's', 'pneumatic time constant of PEA1&2 at rest volume [s]'),
-    ('bellows_time_constant', 's', 'pneumatic time constant of a bellows at rest volume [s]'),
-    ('pea_creep_time', 's', 'creep time of the PEA wall at small strain [s]'),
-    ('bellows_creep_time', 's', 'creep time of a bellows wall at small strain [s]'),
-    ('pea_play', '', 'half-width of the play operator on the PEA stretch [-]'),
-    ('bellows_play', '', 'half-width of the play operator on a bellows stretch [-]'),
-    ('valve_delay', 's', 'transport delay from a command to the valve outputs [s]'),
-    ('max_substep', 's', 'largest internal integration step [s]'),
-)
-PLANT_PARAMETER_NAMES = {
-    field: f"plant.{field}{'_' + unit if unit else ''}" for field, unit, _ in _PLANT_FIELDS}
-"""ROS parameter of each physical `SoftArmPlantParams` field (``plant.*``, unit-suffixed)."""
 # the fields with parameters outside plant.*, for error messages naming the parameter
 _OTHER_PARAMETER_NAMES = {'noise_center_px': 'measurement_noise.center_px',
                           'noise_radius_px': 'measurement_noise.radius_px'}
 # no ranges here: SoftArmPlantParams is the one check of the plant's constants
 PLANT_PARAMETERS = tuple(
-    Parameter(PLANT_PARAMETER_NAMES[field], float(getattr(_PLANT, field)), description,
+    Parameter(name, float(getattr(_PLANT, field)), PLANT_PARAMETER_DESCRIPTIONS[field],
               read_only=True)
-    for field, _, description in _PLANT_FIELDS)
+    for field, name in PLANT_PARAMETER_NAMES.items())
 PARAMETERS = (
     Parameter('physics_rate_hz', 50.0, 'simulation step rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
