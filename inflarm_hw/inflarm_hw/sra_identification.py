@@ -194,7 +194,8 @@ class PlantIdentification:
     position_rms : ndarray, shape (3,)
         RMS of measured minus replayed end point per axis x, y, z [m].
     evaluations : int
-        Replays of the recording the fit took.
+        Evaluations of the residuals the optimizer took, each a replay of the recording (the
+        finite-difference Jacobians, one replay per fitted field each, not counted).
     converged : bool
         Whether the optimizer met a tolerance (rather than its evaluation budget).
     message : str
@@ -241,7 +242,7 @@ def identify_plant(
         Expected measurement error of a pressure [Pa] and of an end point coordinate [m]: the
         weights that make the two kinds of residual comparable, > 0.
     max_evaluations : int
-        Budget of replays, >= 1.
+        Budget of residual evaluations (`PlantIdentification.evaluations`), >= 1.
 
     Returns
     -------

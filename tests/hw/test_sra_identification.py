@@ -11,35 +11,8 @@ from inflarm_hw.sra_identification import (
     identify_plant,
     replay_recording,
 )
-from inflarm_hw.sra_plant import NOISE_FREE, SoftArmPlant
-
-
-def plant_run(params, duration_s: float, seed: int, pressure_noise_pa: float = 0.0):
-    """A recording of ``params`` on random valve steps: commands and pressures at 10 Hz, the
-    measured end point at 5 Hz (sra_sim's rates); also the true end points."""
-    rng = np.random.default_rng(seed)
-    plant = SoftArmPlant(1, params, rng=np.random.default_rng(seed + 1))
-    dt = 0.1
-    command = np.zeros(5)
-    change_at = 0.5
-    times, commands, pressures, position_times, positions, truth = [], [], [], [], [], []
-    for k in range(int(round(duration_s / dt))):
-        t = k * dt
-        times.append(t)
-        pressures.append(plant.chamber_pressures[0] + rng.normal(0.0, pressure_noise_pa, 5))
-        if k % 2 == 0:
-            position_times.append(t)
-            positions.append(plant.measure()[0])
-            truth.append(plant.end_point[0])
-        if t >= change_at:  # each valve on (5-60 kPa) or vented, for 1-2.5 s
-            command = np.where(rng.random(5) < 0.6, rng.uniform(5e3, 60e3, 5), 0.0)
-            change_at = t + rng.uniform(1.0, 2.5)
-        commands.append(command.copy())
-        plant.step(command, dt)
-    recording = PlantRecording(np.array(times), np.array(commands), np.array(times),
-                               np.array(pressures), np.array(position_times),
-                               np.array(positions))
-    return recording, np.array(truth)
+from inflarm_hw.sra_plant import NOISE_FREE
+from sra_recording import plant_run
 
 
 def test_the_replay_is_the_plant_run_itself():
