@@ -27,12 +27,12 @@ Parameters:
     measurement_noise.center_px, measurement_noise.radius_px (double): the image errors behind
         it [px] (`inflarm_hw.sra_plant.SoftArmPlantParams`): depth noise along the camera's line
         of sight larger than across it.
-    plant.* (double, read-only): the plant's physical constants (`PLANT_PARAMETER_NAMES`: one
-        per `inflarm_hw.sra_plant.SoftArmPlantParams` field, named with its unit, e.g.
-        ``plant.pea_modulus_pa``, ``plant.valve_delay_s``; defaults those of
-        `SoftArmPlantParams`), so that ``--params-file plant.yaml`` loads an identified plant
-        (``inflarm-identify-plant``). A value the plant rejects stops the start with a message
-        naming the parameter.
+    plant.* (double, read-only): the plant's physical constants, one per
+        `inflarm_hw.sra_plant.SoftArmPlantParams` field, named with its unit by
+        `inflarm_hw.sra_plant.PLANT_PARAMETER_NAMES` (``plant.pea_modulus_pa``,
+        ``plant.valve_delay_s``, ...), defaults those of `SoftArmPlantParams`: ``--params-file
+        plant.yaml`` loads an identified plant (``inflarm-identify-plant``). A value the plant
+        rejects stops the start with a message naming the parameter.
     cmd_timeout_s (double, 0.05-5): without a command for this long the MCU vents every chamber.
     max_chamber_pressure_pa (double, read-only): commands above this are rejected whole.
     frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
@@ -122,7 +122,7 @@ def plant_params_from_parameters(values: dict) -> SoftArmPlantParams:
             noise_radius_px=values['measurement_noise.radius_px'],
             camera=camera_from_parameters(values))
     except PlantParameterError as error:
-        name = PLANT_PARAMETER_NAMES.get(error.field, _OTHER_PARAMETER_NAMES.get(error.field))
+        name = {**PLANT_PARAMETER_NAMES, **_OTHER_PARAMETER_NAMES}.get(error.field, error.field)
         raise ValueError(f"parameter '{name}': {error}") from error
 
 
