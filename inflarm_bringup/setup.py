@@ -29,6 +29,7 @@ setup(
             'inflarm-demo = inflarm_bringup.demo:main',
             'inflarm-build-knowledge = inflarm_bringup.knowledge_cli:main',
             'inflarm-estimate-bag = inflarm_bringup.bag_estimate:main',
+            'inflarm-identify-plant = inflarm_bringup.identify_plant:main',
             'inflarm-bag-regression = inflarm_bringup.bag_regression:main',
             'inflarm-sra-experiments = inflarm_bringup.sra_experiments:main',
             'inflarm-repulsion-figure = inflarm_bringup.repulsion:main',

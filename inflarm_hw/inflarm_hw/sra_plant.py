@@ -105,6 +105,15 @@ def wall_pressure(stretch: npt.ArrayLike, modulus: npt.ArrayLike) -> npt.NDArray
     return modulus * (lam - lam ** -2)
 
 
+class PlantParameterError(ValueError):
+    """A `SoftArmPlantParams` field out of its range; ``field`` names it (a node maps it to the
+    ROS parameter it came from)."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+
+
 @dataclass(frozen=True)
 class SoftArmPlantParams:
     """Constants of the simulated SRA, each identified from the paper or chosen (with why).
@@ -219,27 +228,59 @@ class SoftArmPlantParams:
 
     def __post_init__(self) -> None:
         if not isinstance(self.valve, ValveModel):
-            raise ValueError(f'expected valve a ValveModel, got {type(self.valve).__name__}')
+            raise PlantParameterError(
+                'valve', f'expected valve a ValveModel, got {type(self.valve).__name__}')
         if not isinstance(self.camera, SraCamera):
-            raise ValueError(f'expected camera a SraCamera, got {type(self.camera).__name__}')
+            raise PlantParameterError(
+                'camera', f'expected camera a SraCamera, got {type(self.camera).__name__}')
         for name, value in vars(self).items():
             if name not in ('valve', 'camera') and not np.isfinite(value):
-                raise ValueError(f'expected finite {name}, got {value}')
+                raise PlantParameterError(name, f'expected finite {name}, got {value}')
         positive = (
             'pba_length', 'pea_rest_length', 'pea_modulus', 'bellows_modulus', 'bellows_lever',
             'bend_limit', 'stroke_sharpness', 'y_bend_ratio', 'pea_time_constant',
             'bellows_time_constant', 'pea_creep_time', 'bellows_creep_time', 'max_substep')
         for name in positive:
             if getattr(self, name) <= 0.0:
-                raise ValueError(f'expected {name} > 0, got {getattr(self, name)}')
+                raise PlantParameterError(name, f'expected {name} > 0, got {getattr(self, name)}')
         non_negative = ('gravity_moment', 'pea_play', 'bellows_play', 'valve_delay',
                         'noise_center_px', 'noise_radius_px')
         for name in non_negative:
             if getattr(self, name) < 0.0:
-                raise ValueError(f'expected {name} >= 0, got {getattr(self, name)}')
+                raise PlantParameterError(
+                    name, f'expected {name} >= 0, got {getattr(self, name)}')
         if self.bend_limit >= 0.5 * np.pi:
-            raise ValueError(f'expected bend_limit < pi / 2 rad, got {self.bend_limit}')
+            raise PlantParameterError(
+                'bend_limit', f'expected bend_limit < pi / 2 rad, got {self.bend_limit}')
 
+
+# physical SoftArmPlantParams field, unit suffix of its ROS parameter ('' if unitless), description
+_PLANT_FIELDS = (
+    ('pba_length', 'm', 'length of the PBA between its plates [m]'),
+    ('pea_rest_length', 'm', 'length of PEA1 (= PEA2) at 0 Pa [m]'),
+    ('pea_modulus', 'pa', 'stiffness mu of the PEA wall, as a pressure [Pa]'),
+    ('bellows_modulus', 'pa', 'stiffness mu of a bellows wall, as a pressure [Pa]'),
+    ('bellows_lever', 'm', "distance of each bellows' axis from the PBA's axis [m]"),
+    ('bend_limit', 'rad', "tilt the bellows' folds allow (stroke limit) [rad]"),
+    ('stroke_sharpness', '', 'sharpness k of the stroke limit [-]'),
+    ('gravity_moment', '', 'weight moment of PEA2 and the end over the PBA stiffness [-]'),
+    ('y_bend_ratio', '', 'tilt about x per bellows stretch relative to the x tilt [-]'),
+    ('bend_skew', 'rad', 'rotation of the bend vector about +z [rad]'),
+    ('pea_time_constant', 's', 'pneumatic time constant of PEA1&2 at rest volume [s]'),
+    ('bellows_time_constant', 's', 'pneumatic time constant of a bellows at rest volume [s]'),
+    ('pea_creep_time', 's', 'creep time of the PEA wall at small strain [s]'),
+    ('bellows_creep_time', 's', 'creep time of a bellows wall at small strain [s]'),
+    ('pea_play', '', 'half-width of the play operator on the PEA stretch [-]'),
+    ('bellows_play', '', 'half-width of the play operator on a bellows stretch [-]'),
+    ('valve_delay', 's', 'transport delay from a command to the valve outputs [s]'),
+    ('max_substep', 's', 'largest internal integration step [s]'),
+)
+PLANT_PARAMETER_NAMES = {
+    field: f"plant.{field}{'_' + unit if unit else ''}" for field, unit, _ in _PLANT_FIELDS}
+"""ROS parameter of each physical `SoftArmPlantParams` field (``plant.*``, unit-suffixed): the
+names under which ``sra_sim`` takes them and ``inflarm-identify-plant`` writes them."""
+PLANT_PARAMETER_DESCRIPTIONS = {field: description for field, _, description in _PLANT_FIELDS}
+"""Description of each field in `PLANT_PARAMETER_NAMES`, with its unit."""
 
 NOISE_FREE = SoftArmPlantParams(noise_center_px=0.0, noise_radius_px=0.0)
 """The default plant (valve delay included) with exact measurements: deterministic trials."""

@@ -8,6 +8,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from inflarm_hw.nodes.sra_sim import SraSim
+from inflarm_hw.sra_plant import PLANT_PARAMETER_NAMES, SoftArmPlantParams
 from inflarm_msgs_json import ChamberPressures, PressureCommand, decode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS
@@ -87,3 +88,25 @@ def test_the_stand_in_measurement_uses_the_camera_geometry(executor):
     assert rig.sim.set_parameters([Parameter('measurement_noise.center_px', value=0.2)])[0] \
         .successful
     assert plant.params.noise_center_px == 0.2
+
+
+def test_the_plant_parameters_default_to_the_plant_and_load_other_values(ros_context):
+    sim = SraSim(context=ros_context, parameter_overrides=[
+        Parameter('plant.pea_modulus_pa', value=80e3),
+        Parameter('plant.valve_delay_s', value=0.25), Parameter('camera.enabled', value=False)])
+    try:
+        defaults = SoftArmPlantParams()
+        assert sim.get_parameter('plant.bellows_time_constant_s').value == \
+            defaults.bellows_time_constant
+        assert sim.plant.params.pea_modulus == 80e3 and sim.plant.params.valve_delay == 0.25
+        assert sim.plant.params.bellows_modulus == defaults.bellows_modulus
+        assert set(PLANT_PARAMETER_NAMES.values()) <= set(sim.params)
+    finally:
+        sim.destroy_node()
+
+
+def test_a_plant_value_the_plant_rejects_refuses_to_start_naming_the_parameter(ros_context):
+    with pytest.raises(ValueError, match=r"parameter 'plant.bellows_modulus_pa': expected "
+                                         r'bellows_modulus > 0, got -1'):
+        SraSim(context=ros_context, parameter_overrides=[
+            Parameter('plant.bellows_modulus_pa', value=-1.0)])

@@ -27,8 +27,12 @@ Parameters:
     measurement_noise.center_px, measurement_noise.radius_px (double): the image errors behind
         it [px] (`inflarm_hw.sra_plant.SoftArmPlantParams`): depth noise along the camera's line
         of sight larger than across it.
-    valve_delay_s (double, read-only): transport delay from a command to the valve outputs
-        [s] (`inflarm_hw.sra_plant.SoftArmPlantParams.valve_delay`).
+    plant.* (double, read-only): the plant's physical constants, one per
+        `inflarm_hw.sra_plant.SoftArmPlantParams` field, named with its unit by
+        `inflarm_hw.sra_plant.PLANT_PARAMETER_NAMES` (``plant.pea_modulus_pa``,
+        ``plant.valve_delay_s``, ...), defaults those of `SoftArmPlantParams`: ``--params-file
+        plant.yaml`` loads an identified plant (``inflarm-identify-plant``). A value the plant
+        rejects stops the start with a message naming the parameter.
     cmd_timeout_s (double, 0.05-5): without a command for this long the MCU vents every chamber.
     max_chamber_pressure_pa (double, read-only): commands above this are rejected whole.
     frame_id (string, read-only): frame of the points (the paper's mount frame, z down PEA1).
@@ -52,7 +56,13 @@ from inflarm_hw.nodes.camera_publisher import (
     camera_from_parameters,
 )
 from inflarm_hw.realtime import ElapsedSteps
-from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
+from inflarm_hw.sra_plant import (
+    PLANT_PARAMETER_DESCRIPTIONS,
+    PLANT_PARAMETER_NAMES,
+    PlantParameterError,
+    SoftArmPlant,
+    SoftArmPlantParams,
+)
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
 from inflarm_msgs_json import ChamberPressures, PressureCommand
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
@@ -62,6 +72,14 @@ from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS, pub
 from inflarm_msgs_json.ros.spin import spin_node
 
 _PLANT = SoftArmPlantParams()
+# the fields with parameters outside plant.*, for error messages naming the parameter
+_OTHER_PARAMETER_NAMES = {'noise_center_px': 'measurement_noise.center_px',
+                          'noise_radius_px': 'measurement_noise.radius_px'}
+# no ranges here: SoftArmPlantParams is the one check of the plant's constants
+PLANT_PARAMETERS = tuple(
+    Parameter(name, float(getattr(_PLANT, field)), PLANT_PARAMETER_DESCRIPTIONS[field],
+              read_only=True)
+    for field, name in PLANT_PARAMETER_NAMES.items())
 PARAMETERS = (
     Parameter('physics_rate_hz', 50.0, 'simulation step rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
@@ -78,9 +96,6 @@ PARAMETERS = (
     Parameter('measurement_noise.radius_px', _PLANT.noise_radius_px,
               "std of the ball image's radius behind the stand-in ball_position [px]",
               range=(0.0, 1.0)),
-    Parameter('valve_delay_s', _PLANT.valve_delay,
-              'transport delay from a command to the valve outputs [s]', range=(0.0, 2.0),
-              read_only=True),
     Parameter('cmd_timeout_s', 2.0, 'vent every chamber after this long without a command [s]',
               range=(0.05, 5.0)),
     Parameter('max_chamber_pressure_pa', CHAMBER_MAX_PRESSURE,
@@ -89,7 +104,26 @@ PARAMETERS = (
     Parameter('frame_id', 'sra_mount', 'frame of the published points', read_only=True),
     Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
               read_only=True),
-) + CAMERA_PARAMETERS
+) + PLANT_PARAMETERS + CAMERA_PARAMETERS
+
+
+def plant_params_from_parameters(values: dict) -> SoftArmPlantParams:
+    """The plant the parameter values ``values`` (by ROS name) describe.
+
+    Raises
+    ------
+    ValueError
+        Naming the ROS parameter whose value the plant rejects.
+    """
+    fields = {field: values[name] for field, name in PLANT_PARAMETER_NAMES.items()}
+    try:
+        return SoftArmPlantParams(
+            **fields, noise_center_px=values['measurement_noise.center_px'],
+            noise_radius_px=values['measurement_noise.radius_px'],
+            camera=camera_from_parameters(values))
+    except PlantParameterError as error:
+        name = {**PLANT_PARAMETER_NAMES, **_OTHER_PARAMETER_NAMES}.get(error.field, error.field)
+        raise ValueError(f"parameter '{name}': {error}") from error
 
 
 class SraSim(GuardedCallbacks, Node):
@@ -99,11 +133,7 @@ class SraSim(GuardedCallbacks, Node):
         self.params = declare_parameters(self, PARAMETERS)
         seed = self.params['seed']
         self.plant = SoftArmPlant(
-            n=1, params=SoftArmPlantParams(
-                noise_center_px=self.params['measurement_noise.center_px'],
-                noise_radius_px=self.params['measurement_noise.radius_px'],
-                valve_delay=self.params['valve_delay_s'],
-                camera=camera_from_parameters(self.params)),
+            n=1, params=plant_params_from_parameters(self.params),
             rng=np.random.default_rng(None if seed < 0 else seed))
         self.command = np.zeros(len(CHAMBERS))
         self.last_command_time = time.monotonic()
