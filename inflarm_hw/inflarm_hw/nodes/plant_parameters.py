@@ -1,5 +1,6 @@
-"""Parameters of the simulated inflatable arm, shared by the nodes that run it (``arm_sim`` and
-``sim_mcu``): one table, one check, one constructor.
+"""Parameters of the simulated plants, shared by the nodes that run them: the inflatable arm's
+(``arm_sim`` and ``sim_mcu``) and the soft arm's (``sra_sim`` and ``sim_mcu``); one table, one
+check, one constructor each.
 
 The arm's geometry, stiffness and link pressures come with them from
 ``inflarm_model.nodes.arm_parameters`` (``ARM_PARAMETERS``, the shared ``inflatable_arm.yaml``).
@@ -11,6 +12,13 @@ import math
 import numpy as np
 
 from inflarm_hw.inflatable_arm_sim import ArmSimParams, InflatableArmSim
+from inflarm_hw.nodes.camera_publisher import camera_from_parameters
+from inflarm_hw.sra_plant import (
+    PLANT_PARAMETER_DESCRIPTIONS,
+    PLANT_PARAMETER_NAMES,
+    PlantParameterError,
+    SoftArmPlantParams,
+)
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.nodes.arm_parameters import (
     ARM_PARAMETERS,
@@ -89,3 +97,38 @@ def apply_arm_plant_parameter(sim: InflatableArmSim, name: str, value) -> str | 
         sim.params = dataclasses.replace(sim.params, **{_NOISE_FIELDS[name]: value})
         return None
     return None
+
+
+# -- the soft arm (sra_sim, sim_mcu) ---------------------------------------------------------
+
+_SRA = SoftArmPlantParams()
+# no ranges here: SoftArmPlantParams is the one check of the plant's constants
+SRA_PLANT_PARAMETERS = tuple(
+    Parameter(name, float(getattr(_SRA, field)), PLANT_PARAMETER_DESCRIPTIONS[field],
+              read_only=True)
+    for field, name in PLANT_PARAMETER_NAMES.items())
+"""The soft-arm plant's physical constants, ``plant.*`` (`PLANT_PARAMETER_NAMES`): an
+identified plant loads with ``--params-file`` (``inflarm-identify-plant``)."""
+# the fields with parameters outside plant.*, for error messages naming the parameter
+_SRA_OTHER_NAMES = {'noise_center_px': 'measurement_noise.center_px',
+                    'noise_radius_px': 'measurement_noise.radius_px'}
+
+
+def sra_plant_from_parameters(values: dict) -> SoftArmPlantParams:
+    """The soft-arm plant the parameter values ``values`` (by ROS name: ``plant.*``,
+    ``measurement_noise.*``, ``camera.*``) describe.
+
+    Raises
+    ------
+    ValueError
+        Naming the ROS parameter whose value the plant rejects.
+    """
+    fields = {field: values[name] for field, name in PLANT_PARAMETER_NAMES.items()}
+    try:
+        return SoftArmPlantParams(
+            **fields, noise_center_px=values['measurement_noise.center_px'],
+            noise_radius_px=values['measurement_noise.radius_px'],
+            camera=camera_from_parameters(values))
+    except PlantParameterError as error:
+        name = {**PLANT_PARAMETER_NAMES, **_SRA_OTHER_NAMES}.get(error.field, error.field)
+        raise ValueError(f"parameter '{name}': {error}") from error

@@ -41,7 +41,8 @@ Parameters:
     measurement_noise.center_px, measurement_noise.radius_px, camera_rate_hz, truth_rate_hz,
         publish_ball_position (default false): the stand-in measurement's image errors [px],
         the camera rate and the truth topics.
-    valve_delay_s (double, read-only): the soft arm's valve transport delay [s].
+    plant.* (double, read-only): the soft arm's physical constants, as for ``sra_sim``
+        (``plant.valve_delay_s`` among them; an identified plant loads with --params-file).
     camera.* : the simulated camera, as for ``sra_sim`` (camera.transport, raw or
         compressed, and camera.jpeg_quality among them).
     arm_frame_id, sra_frame_id (string, read-only); seed (int, read-only).
@@ -63,13 +64,14 @@ from inflarm_hw.mcu_protocol import PROTOCOL_VERSION, FaultKind
 from inflarm_hw.nodes.camera_publisher import (
     CAMERA_PARAMETERS,
     CameraPublisher,
-    camera_from_parameters,
 )
 from inflarm_hw.nodes.plant_parameters import (
     ARM_PLANT_PARAMETERS,
+    SRA_PLANT_PARAMETERS,
     apply_arm_plant_parameter,
     arm_plant_from_parameters,
     check_arm_plant_parameters,
+    sra_plant_from_parameters,
 )
 from inflarm_hw.realtime import ElapsedSteps
 from inflarm_hw.sim_mcu import McuPort, SimMcu, SimMcuParams
@@ -104,9 +106,6 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('measurement_noise.radius_px', _SRA.noise_radius_px,
               "std of the ball image's radius behind the stand-in ball_position [px]",
               range=(0.0, 1.0), read_only=True),
-    Parameter('valve_delay_s', _SRA.valve_delay,
-              "transport delay from a command to the soft arm's valve outputs [s]",
-              range=(0.0, 2.0), read_only=True),
     Parameter('camera_rate_hz', 5.0, 'simulated camera rate [Hz] (paper: about 5 Hz)',
               range=(0.1, 100.0), read_only=True),
     Parameter('truth_rate_hz', 10.0, 'rate of the truth topics [Hz]', range=(0.1, 500.0),
@@ -124,7 +123,7 @@ PARAMETERS = ARM_PLANT_PARAMETERS + (
     Parameter('fault.value', 0.0, 'share of bytes or frames (0-1), or pressure [Pa]'),
     Parameter('fault.duration_s', 0.0, 'how long the fault lasts [s]; 0: until cleared',
               range=(0.0, 3600.0)),
-) + CAMERA_PARAMETERS
+) + SRA_PLANT_PARAMETERS + CAMERA_PARAMETERS
 
 
 def check_parameters(p: dict) -> None:
@@ -151,10 +150,7 @@ class SimMcuNode(GuardedCallbacks, Node):
         if p['plant'] in ('arm', 'both'):
             arm = arm_plant_from_parameters(p, rng)
         if p['plant'] in ('sra', 'both'):
-            sra = SoftArmPlant(1, SoftArmPlantParams(
-                noise_center_px=p['measurement_noise.center_px'],
-                noise_radius_px=p['measurement_noise.radius_px'],
-                valve_delay=p['valve_delay_s'], camera=camera_from_parameters(p)), rng)
+            sra = SoftArmPlant(1, sra_plant_from_parameters(p), rng)
         self.mcu = SimMcu(arm, sra, p['arm.link_pressure_pa'], SimMcuParams(
             protocol_version=p['protocol_version'], default_watchdog_s=p['watchdog_default_s'],
             pressure_noise_pa=p['noise.pressure_pa']), rng)
@@ -220,6 +216,9 @@ class SimMcuNode(GuardedCallbacks, Node):
             self.port.write(self.mcu.receive(data, time.monotonic()))
 
     def step(self) -> None:
+        # the line first, as an MCU reads it: after a stall of this process its timers run
+        # before the poll, and the watchdog would trip on commands waiting in the pty
+        self.poll()
         dt = self.elapsed()
         if dt > 0.0:
             self.port.write(self.mcu.step(dt, time.monotonic()))

@@ -50,19 +50,10 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from inflarm_hw.nodes.camera_publisher import (
-    CAMERA_PARAMETERS,
-    CameraPublisher,
-    camera_from_parameters,
-)
+from inflarm_hw.nodes.camera_publisher import CAMERA_PARAMETERS, CameraPublisher
+from inflarm_hw.nodes.plant_parameters import SRA_PLANT_PARAMETERS, sra_plant_from_parameters
 from inflarm_hw.realtime import ElapsedSteps
-from inflarm_hw.sra_plant import (
-    PLANT_PARAMETER_DESCRIPTIONS,
-    PLANT_PARAMETER_NAMES,
-    PlantParameterError,
-    SoftArmPlant,
-    SoftArmPlantParams,
-)
+from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBER_MAX_PRESSURE, CHAMBERS, check_chamber_pressures
 from inflarm_msgs_json import ChamberPressures, PressureCommand
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
@@ -72,14 +63,6 @@ from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS, pub
 from inflarm_msgs_json.ros.spin import spin_node
 
 _PLANT = SoftArmPlantParams()
-# the fields with parameters outside plant.*, for error messages naming the parameter
-_OTHER_PARAMETER_NAMES = {'noise_center_px': 'measurement_noise.center_px',
-                          'noise_radius_px': 'measurement_noise.radius_px'}
-# no ranges here: SoftArmPlantParams is the one check of the plant's constants
-PLANT_PARAMETERS = tuple(
-    Parameter(name, float(getattr(_PLANT, field)), PLANT_PARAMETER_DESCRIPTIONS[field],
-              read_only=True)
-    for field, name in PLANT_PARAMETER_NAMES.items())
 PARAMETERS = (
     Parameter('physics_rate_hz', 50.0, 'simulation step rate [Hz]', range=(1.0, 1000.0),
               read_only=True),
@@ -104,26 +87,7 @@ PARAMETERS = (
     Parameter('frame_id', 'sra_mount', 'frame of the published points', read_only=True),
     Parameter('seed', -1, 'noise seed, -1 for a random one', range=(-1, 2**31 - 1),
               read_only=True),
-) + PLANT_PARAMETERS + CAMERA_PARAMETERS
-
-
-def plant_params_from_parameters(values: dict) -> SoftArmPlantParams:
-    """The plant the parameter values ``values`` (by ROS name) describe.
-
-    Raises
-    ------
-    ValueError
-        Naming the ROS parameter whose value the plant rejects.
-    """
-    fields = {field: values[name] for field, name in PLANT_PARAMETER_NAMES.items()}
-    try:
-        return SoftArmPlantParams(
-            **fields, noise_center_px=values['measurement_noise.center_px'],
-            noise_radius_px=values['measurement_noise.radius_px'],
-            camera=camera_from_parameters(values))
-    except PlantParameterError as error:
-        name = {**PLANT_PARAMETER_NAMES, **_OTHER_PARAMETER_NAMES}.get(error.field, error.field)
-        raise ValueError(f"parameter '{name}': {error}") from error
+) + SRA_PLANT_PARAMETERS + CAMERA_PARAMETERS
 
 
 class SraSim(GuardedCallbacks, Node):
@@ -133,10 +97,10 @@ class SraSim(GuardedCallbacks, Node):
         self.params = declare_parameters(self, PARAMETERS)
         seed = self.params['seed']
         self.plant = SoftArmPlant(
-            n=1, params=plant_params_from_parameters(self.params),
+            n=1, params=sra_plant_from_parameters(self.params),
             rng=np.random.default_rng(None if seed < 0 else seed))
         self.command = np.zeros(len(CHAMBERS))
-        self.last_command_time = time.monotonic()
+        self.last_command_time = self.last_step_time = time.monotonic()
         self.vented = True
 
         self.create_guarded_subscription(
@@ -186,9 +150,14 @@ class SraSim(GuardedCallbacks, Node):
             self.get_logger().info('commands received: valves follow them')
 
     def step(self) -> None:
-        # Fail safe like the MCU: a silent controller gets every chamber vented.
-        if (not self.vented
-                and time.monotonic() - self.last_command_time > self.params['cmd_timeout_s']):
+        # Fail safe like the MCU: a silent controller gets every chamber vented. Not on the
+        # first step after a stall of this process (its timers run before its subscriptions):
+        # the commands that came meanwhile are still queued, and an MCU would have read them.
+        now = time.monotonic()
+        stalled = now - self.last_step_time > 5.0 * self.dt
+        self.last_step_time = now
+        if (not self.vented and not stalled
+                and now - self.last_command_time > self.params['cmd_timeout_s']):
             self.command[:] = 0.0
             self.vented = True
             self.get_logger().warning(
