@@ -51,7 +51,7 @@ from numba import guvectorize, njit
 import numpy as np
 import numpy.typing as npt
 
-from inflarm_model.kinematics import dh_chain_kinematics
+from inflarm_model.kinematics import all_finite, dh_chain_kinematics
 from inflarm_model.urdf import (
     DEFAULT_STIFFNESS,
     MOTOR_INDICES,
@@ -124,7 +124,7 @@ def check_vector(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[
         raise ValueError(f'expected {name} of shape ({n},) [{unit}], got {x!r}') from None
     if v.shape != (n,):
         raise ValueError(f'expected {name} of shape ({n},) [{unit}], got shape {v.shape}')
-    if not np.isfinite(v).all():
+    if not all_finite(v):
         raise ValueError(f'expected {name} to be finite [{unit}], got {v}')
     return v
 

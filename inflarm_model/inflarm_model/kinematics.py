@@ -57,9 +57,21 @@ __all__ = [
 _asarray = np.asarray
 _isfinite = math.isfinite
 _hypot = math.hypot
+# Index arrays of MOTOR_INDICES and SPRING_INDICES (an array indexes 8x faster than a list).
+_MOTOR_INDEX, _SPRING_INDEX = np.array(MOTOR_INDICES), np.array(SPRING_INDICES)
 _frame_jacobian = pin.computeFrameJacobian
 _frames_forward_kinematics = pin.framesForwardKinematics
 _LOCAL_WORLD_ALIGNED = pin.LOCAL_WORLD_ALIGNED
+
+
+def all_finite(v: npt.NDArray[np.float64]) -> bool:
+    """Whether every entry of a small float vector ``v`` (shape (n,)) is finite.
+
+    hypot of the entries is finite iff every entry is, unless finite entries overflow it (then
+    the entry-wise test decides): one C call on a list, a fraction of the cost of
+    ``np.isfinite(v).all()`` for the few entries of a joint vector.
+    """
+    return _isfinite(_hypot(*v.tolist())) or bool(np.isfinite(v).all())
 
 
 def _vector(name: str, x: npt.ArrayLike, n: int) -> npt.NDArray[np.float64]:
@@ -70,7 +82,7 @@ def _vector(name: str, x: npt.ArrayLike, n: int) -> npt.NDArray[np.float64]:
         raise ValueError(f'expected {name} of shape ({n},), got {x!r}') from None
     if v.shape != (n,):
         raise ValueError(f'expected {name} of shape ({n},), got {v.shape}')
-    if not np.isfinite(v).all():
+    if not all_finite(v):
         raise ValueError(f'expected {name} to be finite, got {v}')
     return v
 
@@ -94,9 +106,7 @@ def _joint_vector(q: npt.ArrayLike, shape: tuple[int]) -> npt.NDArray[np.float64
         v = _asarray(q, dtype=float)
     except (TypeError, ValueError):
         return _vector('q', q, shape[0])
-    # hypot is finite iff every entry is (unless finite entries overflow it, which _vector
-    # then accepts): one C call on a list, a fifth of the cost of np.isfinite(v).all().
-    if v.shape != shape or not _isfinite(_hypot(*v.tolist())):
+    if v.shape != shape or not all_finite(v):
         return _vector('q', q, shape[0])
     return v
 
@@ -627,8 +637,8 @@ class FlexibleArm(DHChain):
             If an argument has the wrong shape or is not finite.
         """
         q = np.empty(7)
-        q[list(cls.MOTOR_INDICES)] = _vector('q_m', q_m, 3)
-        q[list(cls.SPRING_INDICES)] = _vector('q_k', q_k, 4)
+        q[_MOTOR_INDEX] = _vector('q_m', q_m, 3)
+        q[_SPRING_INDEX] = _vector('q_k', q_k, 4)
         return q
 
     @classmethod
@@ -655,4 +665,4 @@ class FlexibleArm(DHChain):
             If ``q`` has the wrong shape or is not finite.
         """
         q = _vector('q', q, 7)
-        return q[list(cls.MOTOR_INDICES)], q[list(cls.SPRING_INDICES)]
+        return q[_MOTOR_INDEX], q[_SPRING_INDEX]

@@ -3,6 +3,8 @@ table (``inflarm_model.urdf.JOINT_LIMITS``): the one place nodes read and write 
 """
 
 from collections.abc import Sequence
+import functools
+import math
 
 import numpy as np
 import numpy.typing as npt
@@ -39,33 +41,38 @@ def joint_arrays(msg: JointState, names: Sequence[str], fields: Sequence[str] = 
         Naming the problem: a missing or repeated joint, a field of the wrong length, a value
         that is not finite, a position outside its limits.
     """
-    given = list(msg.name)
-    repeated = sorted({n for n in given if given.count(n) > 1})
-    if repeated:
-        raise InputError('repeated joint', f'joints {repeated} appear more than once')
-    missing = [n for n in names if n not in given]
-    if missing:
-        raise InputError('missing joint', f'expected joints {list(names)}, got {given}')
-    index = [given.index(n) for n in names]
+    index = _joint_index(tuple(msg.name), tuple(names))
     arrays: dict[str, npt.NDArray[np.float64] | None] = {}
     for field in (*fields, *optional):
         values = getattr(msg, field)
         if len(values) == 0 and field in optional:
             arrays[field] = None
             continue
-        if len(values) != len(given):
-            raise InputError('array length', f'{len(given)} joint names but {len(values)} '
+        if len(values) != len(msg.name):
+            raise InputError('array length', f'{len(msg.name)} joint names but {len(values)} '
                                              f'{field} values')
-        array = np.array([values[i] for i in index], dtype=float)
-        if not np.isfinite(array).all():
-            raise InputError('not finite', f'{field} of {list(names)} is {array.tolist()}')
-        arrays[field] = array
+        picked = [float(values[i]) for i in index]
+        if not all(map(math.isfinite, picked)):
+            raise InputError('not finite', f'{field} of {list(names)} is {picked}')
+        arrays[field] = np.array(picked)
     if arrays.get('position') is not None:
         try:
-            check_joint_positions(names, arrays['position'])
+            check_joint_positions(names, arrays['position'].tolist())
         except ValueError as error:
             raise InputError('joint limit', str(error)) from error
     return arrays
+
+
+@functools.lru_cache(maxsize=64)
+def _joint_index(given: tuple[str, ...], names: tuple[str, ...]) -> tuple[int, ...]:
+    """Where each of ``names`` is in a message's ``given`` names: resolved once per layout."""
+    repeated = sorted({n for n in given if given.count(n) > 1})
+    if repeated:
+        raise InputError('repeated joint', f'joints {repeated} appear more than once')
+    missing = [n for n in names if n not in given]
+    if missing:
+        raise InputError('missing joint', f'expected joints {list(names)}, got {list(given)}')
+    return tuple(given.index(n) for n in names)
 
 
 def joint_state(names: Sequence[str], stamp=None, **fields: npt.ArrayLike) -> JointState:
