@@ -9,6 +9,7 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
+from inflarm_hw.nodes.sim_mcu import SimMcuNode
 from inflarm_hw.nodes.sra_sim import SraSim
 from inflarm_hw.sra_plant import PLANT_PARAMETER_NAMES, SoftArmPlantParams
 from inflarm_msgs_json import ChamberPressures, PressureCommand, decode
@@ -132,3 +133,19 @@ def test_a_plant_value_the_plant_rejects_refuses_to_start_naming_the_parameter(r
                                          r'bellows_modulus > 0, got -1'):
         SraSim(context=ros_context, parameter_overrides=[
             Parameter('plant.bellows_modulus_pa', value=-1.0)])
+
+
+def test_sim_mcu_takes_the_same_plant_parameters(ros_context):
+    # one table for both simulators of the soft arm: an identified plant loads into either
+    overrides = [Parameter('plant', value='sra'), Parameter('camera.enabled', value=False)]
+    mcu = SimMcuNode(context=ros_context, parameter_overrides=[
+        *overrides, Parameter('plant.valve_delay_s', value=0.25)])
+    try:
+        assert mcu.mcu.sra.params.valve_delay == 0.25
+        assert set(PLANT_PARAMETER_NAMES.values()) <= set(mcu.params)
+    finally:
+        mcu.destroy_node()
+    with pytest.raises(ValueError, match=r"parameter 'plant.pea_time_constant_s': expected "
+                                         r'pea_time_constant > 0, got 0'):
+        SimMcuNode(context=ros_context, parameter_overrides=[
+            *overrides, Parameter('plant.pea_time_constant_s', value=0.0)])
