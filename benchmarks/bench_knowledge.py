@@ -9,7 +9,7 @@ Prints, for the paper's full 67,200-point grid (a 32 MB file in a temporary dire
 - open time [ms] of the full file (target: the worst of 20 opens <= 50 ms), against
   ``np.fromfile`` reading it all;
 - with ``--full-build``: wall time of ``build_knowledge_database`` over all 67,200 points
-  (target <= 120 s on the 2-core machine; ~90 s);
+  (target <= 120 s on the 2-core machine; ~70 s on the physical plant);
 - in the full run (and with ``--distributed``): build speed [points/s] on a Dask cluster of 1 and
   of 2 workers (``distributed.LocalCluster``, one process and one thread per worker, on this
   machine) over 6,400 points (40 x 40 x 4) x 30 trials, against the local build in this process

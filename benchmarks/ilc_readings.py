@@ -14,7 +14,7 @@ plant (instantaneous valves) and the default one (valves 0.1 s behind their comm
 - C, implemented: `PidIlcController.finish_trial`'s phase-lead update.
 
 Only public API: B and C run `PidIlcController` (B keeps its commands as the next memory), A
-is the literal update written out below. ``python benchmarks/ilc_readings.py`` (about 1 min).
+is the literal update written out below. ``python benchmarks/ilc_readings.py`` (about 15 s).
 """
 
 import numpy as np
