@@ -47,7 +47,6 @@ Everything is vectorized over a leading axis of ``n`` tasks (arms). Pure numpy, 
 """
 
 from dataclasses import dataclass, field
-import math
 
 import numpy as np
 import numpy.typing as npt
@@ -410,8 +409,6 @@ class PidIlcController:
         self._tail_count = np.zeros((n, 3))
         self._k = 0
         self._active = True
-        if n == 1:
-            self._start_single()
 
     def _chamber_command(self, output: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Valve set pressures (n, 5) of the axis outputs (n, 3)."""
@@ -420,93 +417,6 @@ class PidIlcController:
         command = np.zeros((output.shape[0], _N_CHAMBERS))
         command[self._rows, self._chamber] = output
         return command
-
-    # -- n = 1: the same arithmetic on Python floats (numpy's per-call overhead dominates) ------
-
-    def _start_single(self) -> None:
-        self._s_kp, self._s_ki, self._s_kd = (g.tolist() for g in (self._kp, self._ki, self._kd))
-        self._s_sign = self._sign[0].tolist()
-        self._s_target = self.target[0].tolist()
-        self._s_ff = self._ff[0].tolist()
-        self._s_p_max = self._p_max_axis[0].tolist()
-        self._s_p_min = self._p_min_axis[0].tolist()
-        self._s_chamber = self._chamber[0].tolist()
-        self._s_tail_start = self._tail_start.tolist()
-        self._s_accumulated = [0.0, 0.0, 0.0]
-        self._s_integral = [0.0, 0.0, 0.0]
-        self._s_previous = [0.0, 0.0, 0.0]
-        self._s_have_previous = False
-        self._s_since_valid = 0.0
-        self._s_output = self._output[0].tolist()
-        self._s_errors = []
-        self._s_tail_sum = [0.0, 0.0, 0.0]
-        self._s_tail_count = [0.0, 0.0, 0.0]
-
-    def _step_single(
-        self, end_point: npt.ArrayLike, dt: float, valid: npt.ArrayLike | None
-    ) -> npt.NDArray[np.float64]:
-        y = np.asarray(end_point, dtype=float)
-        if y.shape != (1, 3):
-            raise ValueError(f'expected end_point of shape (1, 3), got {y.shape}')
-        if not (dt > 0.0 and math.isfinite(dt)):
-            raise ValueError(f'expected dt > 0 s, got {dt}')
-        ok = True
-        if valid is not None:
-            v = np.asarray(valid, dtype=bool)
-            if v.shape != (1,):
-                raise ValueError(f'expected valid of shape (1,), got {v.shape}')
-            ok = bool(v[0])
-        measured = y.ravel().tolist()
-        if ok and not all(math.isfinite(c) for c in measured):
-            where = '' if valid is None else ' where valid'
-            raise ValueError(f'expected finite end_point [m]{where}, got NaN or inf')
-        k = self._k
-        if ok:
-            ff = self._s_ff[min(k, self.params.memory_steps - 1)]
-            elapsed = self._s_since_valid + dt
-            errors = [0.0, 0.0, 0.0]
-            for a in range(3):
-                error = self._s_sign[a] * (self._s_target[a] - measured[a])
-                integral = self._s_integral[a] + error * dt
-                derivative = ((error - self._s_previous[a]) / elapsed
-                              if self._s_have_previous else 0.0)
-                raw = ff[a] + self._s_accumulated[a] + (
-                    self._s_kp[a] * error + self._s_ki[a] * integral
-                    + self._s_kd[a] * derivative)
-                p_max, p_min = self._s_p_max[a], self._s_p_min[a]
-                output = min(max(raw, p_min), p_max)
-                if not ((raw > p_max and error > 0.0) or (raw < p_min and error < 0.0)):
-                    self._s_integral[a] = integral
-                self._s_accumulated[a] = output - ff[a]
-                self._s_previous[a] = error
-                self._s_output[a] = output
-                errors[a] = error
-                if k >= self._s_tail_start[a]:
-                    self._s_tail_sum[a] += error
-                    self._s_tail_count[a] += 1.0
-            self._s_have_previous = True
-            self._s_since_valid = 0.0
-        else:
-            self._s_since_valid += dt
-            errors = [math.nan, math.nan, math.nan]
-        if k < self._n_errors:
-            self._s_errors.append(errors)
-        self._k = k + 1
-        if self._antagonistic:
-            return antagonistic_pressures(np.array([self._s_output]), self._preload)
-        command = [0.0] * _N_CHAMBERS
-        for a in range(3):
-            command[self._s_chamber[a]] = self._s_output[a]
-        return np.array([command])
-
-    def _finish_single(self) -> None:
-        """Copy the float state of `_step_single` into the arrays `finish_trial` reads."""
-        if self._s_errors:
-            self._errors[0, :len(self._s_errors)] = self._s_errors
-        self._accumulated[0] = self._s_accumulated
-        self._tail_sum[0] = self._s_tail_sum
-        self._tail_count[0] = self._s_tail_count
-        self._output[0] = self._s_output
 
     def step(
         self, end_point: npt.ArrayLike, dt: float, valid: npt.ArrayLike | None = None
@@ -538,8 +448,6 @@ class PidIlcController:
         """
         if not self._active:
             raise ValueError('expected start_trial() before step()')
-        if self.n == 1:
-            return self._step_single(end_point, dt, valid)
         y = np.asarray(end_point, dtype=float)
         if y.shape != (self.n, 3):
             raise ValueError(f'expected end_point of shape ({self.n}, 3), got {y.shape}')
@@ -616,8 +524,6 @@ class PidIlcController:
         """
         if not self._active:
             raise ValueError('expected start_trial() before finish_trial()')
-        if self.n == 1:
-            self._finish_single()
         p = self.params
         m = p.memory_steps
         errors = self._errors

@@ -129,7 +129,7 @@ def test_quadrant_table_is_a_parameter():
     np.testing.assert_array_equal(c.chamber_of_axis, [[B4, B1, PEA]])
 
 
-@pytest.mark.parametrize('n', [1, 2])  # n = 1 runs on Python floats, n > 1 on arrays
+@pytest.mark.parametrize('n', [1, 2])
 def test_output_accumulates_the_pid_compensation(n):
     params = PidIlcParams(kp=(1e4, 1e4, 4e3), ki=(2e3, 2e3, 1e3), kd=(500.0, 500.0, 200.0))
     c = PidIlcController(n, params)
@@ -215,7 +215,7 @@ def test_dropout_holds_pressures_and_teaches_nothing():
     assert np.all(learned[1, :, [B4, B3, PEA]] > 8e3)
 
 
-def test_single_task_path_matches_the_batched_path_with_dropouts():
+def test_a_task_runs_alike_alone_and_in_a_batch_with_dropouts_of_its_own():
     rng = np.random.default_rng(7)
     valid = rng.random(80) > 0.3
     memory = None
