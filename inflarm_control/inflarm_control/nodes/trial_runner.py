@@ -15,12 +15,11 @@ Parameters:
     target (double[3], read-only): target point [m] in ``frame_id``.
     trials (int, read-only): number of trials to run.
     mode (string, read-only): 'pid' or 'pid_ilc'.
-    settle_time_s (double): rest between venting and the next trial [s].
-    report_timeout_s (double): start the cycle again when a report is this late [s].
+    settle_time_s (double): rest between venting and the next trial [s], node clock.
+    report_timeout_s (double): start the cycle again when a report is this late [s], node
+        clock (simulated time with ``use_sim_time``).
     frame_id (string, read-only).
 """
-
-import time
 
 from rclpy.node import Node
 from std_msgs.msg import String
@@ -56,7 +55,7 @@ class TrialRunner(GuardedCallbacks, Node):
                                 mode=p['mode'], trial_id=0)
         self.trial = 0
         self.phase = 'vent'  # vent -> settle -> run -> vent ...; 'done' at the end
-        self.phase_since = time.monotonic()
+        self.phase_since = self.get_clock().now()  # the node clock: simulated time too
         self.task_pub = self.create_publisher(
             String, 'control_task', RELIABLE_QOS,
             event_callbacks=publisher_events(self, 'control_task'))
@@ -69,10 +68,10 @@ class TrialRunner(GuardedCallbacks, Node):
 
     def enter(self, phase: str) -> None:
         self.phase = phase
-        self.phase_since = time.monotonic()
+        self.phase_since = self.get_clock().now()
 
     def tick(self) -> None:
-        in_phase = time.monotonic() - self.phase_since
+        in_phase = (self.get_clock().now() - self.phase_since).nanoseconds * 1e-9
         if self.phase == 'vent' and self.vent_client.service_is_ready():
             self.vent_client.call_async(Trigger.Request())
             self.enter('settle')
