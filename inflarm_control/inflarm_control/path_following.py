@@ -50,7 +50,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from inflarm_control.pid_ilc import antagonistic_pressures, axis_outputs
+from inflarm_control.pid_ilc import antagonistic_pressures, axis_outputs, clip_without_windup
 from inflarm_model.alert_regions import check_regions, repulsive_offset
 from inflarm_model.soft_arm import (
     CHAMBER_MAX_PRESSURE,
@@ -415,10 +415,8 @@ class PathFollower:
             error = (lag + k * self._repulsion) / (1.0 + k)
         integral = self._integral + self._ki * error * dt
         raw = self._feedforward(self._lead_arc()) + integral + self._kp * error
-        output = np.clip(raw, self._low, self._high)
-        # anti-windup: no integration while the output is pinned the way the error pushes
-        pinned = ((raw > self._high) & (error > 0.0)) | ((raw < self._low) & (error < 0.0))
-        self._integral = np.where(pinned, self._integral, integral)
+        output, self._integral = clip_without_windup(raw, self._low, self._high, error, integral,
+                                                     self._integral)
         self._command = np.minimum(antagonistic_pressures(output, params.bellows_preload),
                                    params.p_max)
         distance = float(np.linalg.norm(error))

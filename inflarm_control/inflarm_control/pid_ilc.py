@@ -124,6 +124,23 @@ def antagonistic_pressures(
     return pressures
 
 
+def clip_without_windup(
+    raw: npt.NDArray[np.float64], low, high, error: npt.NDArray[np.float64],
+    integral: npt.NDArray[np.float64], previous_integral: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """An output clipped to ``[low, high]`` and its integral, with anti-windup by conditional
+    integration: the integral keeps ``previous_integral`` where the output is pinned against a
+    limit in the direction the error pushes (the path follower's PI and eq. (1) here).
+
+    Returns
+    -------
+    output, integral : ndarray
+    """
+    output = np.minimum(np.maximum(raw, low), high)
+    pinned = ((raw > high) & (error > 0.0)) | ((raw < low) & (error < 0.0))
+    return output, np.where(pinned, previous_integral, integral)
+
+
 @dataclass(frozen=True)
 class PidIlcParams:
     """Gains and limits of the three axis controllers (x, y, z).
@@ -474,12 +491,8 @@ class PidIlcController:
         derivative = np.where(self._have_previous, (error - self._previous_error) / elapsed, 0.0)
         raw = ff + self._accumulated + (self._kp * error + self._ki * integral
                                         + self._kd * derivative)
-        output = np.minimum(np.maximum(raw, self._p_min_axis), self._p_max_axis)
-        # anti-windup: keep the integral only while the output is not pinned against a limit
-        # in the direction the error is pushing
-        pinned = (((raw > self._p_max_axis) & (error > 0.0))
-                  | ((raw < self._p_min_axis) & (error < 0.0)))
-        integral = np.where(pinned, self._integral, integral)
+        output, integral = clip_without_windup(raw, self._p_min_axis, self._p_max_axis, error,
+                                               integral, self._integral)
         accumulated = output - ff  # back-calculation: clipping never winds up eq. (3)
         if ok is None:
             self._integral = integral

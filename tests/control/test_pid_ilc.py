@@ -4,7 +4,12 @@
 import numpy as np
 import pytest
 
-from inflarm_control.pid_ilc import PidIlcController, PidIlcParams, run_trials
+from inflarm_control.pid_ilc import (
+    PidIlcController,
+    PidIlcParams,
+    clip_without_windup,
+    run_trials,
+)
 from inflarm_hw.sra_plant import IDEAL, NOISE_FREE, SoftArmPlant, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBERS
 
@@ -233,6 +238,16 @@ def test_a_task_runs_alike_alone_and_in_a_batch_with_dropouts_of_its_own():
         np.testing.assert_allclose(plants[0].end_point[0], plants[1].end_point[0], rtol=1e-12)
         memory = single.finish_trial()
         np.testing.assert_allclose(memory[0], batch.finish_trial()[0], rtol=1e-12, atol=1e-9)
+
+
+def test_the_integral_holds_only_where_the_output_is_pinned_the_way_the_error_pushes():
+    raw = np.array([120.0, 120.0, 50.0, -10.0, -10.0])
+    error = np.array([1.0, -1.0, 1.0, -1.0, 1.0])
+    integral, previous = np.full(5, 7.0), np.full(5, 3.0)
+    output, kept = clip_without_windup(raw, 0.0, 100.0, error, integral, previous)
+    np.testing.assert_array_equal(output, [100.0, 100.0, 50.0, 0.0, 0.0])
+    # pinned high pushed higher, pinned low pushed lower: held; pulled back or free: integrated
+    np.testing.assert_array_equal(kept, [3.0, 7.0, 7.0, 3.0, 7.0])
 
 
 def test_nan_measurement_is_rejected():
