@@ -44,7 +44,6 @@ import math
 from geometry_msgs.msg import PointStamped, WrenchStamped
 from nav_msgs.msg import Path
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
@@ -59,7 +58,7 @@ from inflarm_model.nodes.arm_parameters import (
 from inflarm_model.ros_conversions import joint_arrays, joint_state
 from inflarm_model.urdf import TIP_LINK, check_joint_positions
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, RELIABLE_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
@@ -149,14 +148,10 @@ class ElastostaticIk(GuardedCallbacks, Node):
             JointState, 'motor_position_command', COMMAND_QOS,
             event_callbacks=publisher_events(self, 'motor_position_command'))
         self.create_guarded_timer(1.0 / self.params['command_rate_hz'], self.stream)
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, check_ik_parameters)
         self.add_post_set_parameters_callback(
             lambda parameters: self.params.update({q.name: q.value for q in parameters}))
         self.get_logger().info(f"ready: load from {self.params['load.source']}")
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        problem = check_ik_parameters({q.name: q.value for q in parameters})
-        return SetParametersResult(successful=problem is None, reason=problem or '')
 
     # -- inputs --------------------------------------------------------------------------------
 

@@ -49,7 +49,6 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped, WrenchStamped
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
@@ -77,7 +76,7 @@ from inflarm_msgs_json.ros.diagnostics import (
     diagnostic_status,
 )
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS, subscription_events
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -145,7 +144,7 @@ class LoadEstimator(GuardedCallbacks, Node):
         self.diagnostics = DiagnosticsPublisher(self, self.diagnostic_status)
         self.create_guarded_timer(1.0 / self.params['link_status_rate_hz'],
                                   self.publish_link_status)
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, check_arm_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info('ready: estimating the tip load from joint_states')
 
@@ -155,10 +154,6 @@ class LoadEstimator(GuardedCallbacks, Node):
                            max_motor_step=p['jump.motor_step_rad'],
                            max_torque_step=p['jump.torque_step_nm'],
                            max_condition=p['max_condition_number'], max_force=p['max_force_n'])
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        problem = check_arm_parameters({q.name: q.value for q in parameters})
-        return SetParametersResult(successful=problem is None, reason=problem or '')
 
     def on_parameters_set(self, parameters) -> None:
         self.params.update({q.name: q.value for q in parameters})

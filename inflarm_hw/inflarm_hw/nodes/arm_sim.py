@@ -33,7 +33,6 @@ import time
 
 from geometry_msgs.msg import PointStamped
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
@@ -48,7 +47,7 @@ from inflarm_hw.realtime import ElapsedSteps
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.ros_conversions import joint_arrays, joint_state
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
@@ -90,13 +89,9 @@ class ArmSim(GuardedCallbacks, Node):
         self.tip_pub = self.create_publisher(PointStamped, 'tip_position_truth', SENSOR_QOS)
         self.spring_pub = self.create_publisher(JointState, 'spring_states_truth', SENSOR_QOS)
         self.create_guarded_timer(self.dt, self.step)
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, check_arm_plant_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(f"ready: tip load {p['tip_force_n']} N at {p['rate_hz']} Hz")
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        problem = check_arm_plant_parameters({q.name: q.value for q in parameters})
-        return SetParametersResult(successful=problem is None, reason=problem or '')
 
     def on_parameters_set(self, parameters) -> None:
         for q in parameters:

@@ -48,7 +48,6 @@ Parameters (read at configure unless noted; the limits' ranges are safe ranges):
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -77,7 +76,7 @@ from inflarm_msgs_json import (
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
 from inflarm_msgs_json.ros.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.qos import (
     COMMAND_QOS,
     JOINT_STATE_QOS,
@@ -185,6 +184,13 @@ def bridge_config(p: dict) -> BridgeConfig:
         chamber_valve=valve, link_valve=valve)
 
 
+def check_bridge_parameters(p: dict) -> None:
+    """Raise ValueError naming the first bad parameter (the driver's only with a ``port``)."""
+    bridge_config(p)
+    if p['port']:
+        driver_config(p)
+
+
 def driver_config(p: dict) -> DriverConfig:
     """The driver configuration of the parameter values ``p``; ``ValueError`` if invalid."""
     if not p['port']:
@@ -198,8 +204,7 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
     def __init__(self, **kwargs) -> None:
         super().__init__('hw_bridge', **kwargs)
         self.params = declare_parameters(self, PARAMETERS)
-        for check in (bridge_config, lambda p: p['port'] and driver_config(p)):
-            check(self.params)  # bad values fail at start, naming the parameter
+        check_bridge_parameters(self.params)  # bad values fail at start, naming the parameter
         self.lifecycle = 'unconfigured'
         self.driver: McuDriver | None = None
         self.supervisor: SafetySupervisor | None = None
@@ -213,7 +218,7 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
         self.status_pub = self.create_publisher(String, '~/status', LATCHED_QOS)
         self.diagnostics = DiagnosticsPublisher(self, self.diagnostic_status)
         self.create_guarded_service(Trigger, '~/reset_fault', self.on_reset_fault)
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, check_bridge_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self._autostart = None
         if self.params['autostart']:
@@ -225,16 +230,6 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
             + (', autostart' if self.params['autostart'] else ''))
 
     # -- parameters -----------------------------------------------------------------------------
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        values = {**self.params, **{q.name: q.value for q in parameters}}
-        try:
-            bridge_config(values)
-            if values['port']:
-                driver_config(values)
-        except ValueError as err:
-            return SetParametersResult(successful=False, reason=str(err))
-        return SetParametersResult(successful=True)
 
     def on_parameters_set(self, parameters) -> None:
         for q in parameters:

@@ -56,7 +56,6 @@ import time
 
 from geometry_msgs.msg import PointStamped
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -78,7 +77,7 @@ from inflarm_hw.sim_mcu import McuPort, SimMcu, SimMcuParams
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.qos import SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -178,18 +177,11 @@ class SimMcuNode(GuardedCallbacks, Node):
         self.create_guarded_timer(1.0 / p['io_rate_hz'], self.poll)
         self.create_guarded_timer(self.dt, self.step)
         self.create_guarded_timer(1.0 / p['truth_rate_hz'], self.publish_truth)
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, check_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: simulated MCU ({p['plant']}) on {self.port.path}"
             + (f' (link {p["link"]})' if p['link'] else '') + f", {p['rate_hz']} Hz")
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        try:
-            check_parameters({q.name: q.value for q in parameters})
-        except ValueError as err:
-            return SetParametersResult(successful=False, reason=str(err))
-        return SetParametersResult(successful=True)
 
     def on_parameters_set(self, parameters) -> None:
         for q in parameters:

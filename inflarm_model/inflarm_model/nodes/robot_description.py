@@ -9,7 +9,6 @@ Parameters:
         spring stiffness, link pressure.
 """
 
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from std_msgs.msg import String
 
@@ -19,7 +18,7 @@ from inflarm_model.nodes.arm_parameters import (
     urdf_from_parameters,
 )
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import declare_parameters
+from inflarm_msgs_json.ros.parameters import check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -35,14 +34,10 @@ class RobotDescription(GuardedCallbacks, Node):
         self.description_pub = self.create_publisher(
             String, 'robot_description', LATCHED_QOS,
             event_callbacks=publisher_events(self, 'robot_description'))
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, check_arm_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.publish()
         self.get_logger().info('ready: robot_description published')
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        problem = check_arm_parameters({p.name: p.value for p in parameters})
-        return SetParametersResult(successful=problem is None, reason=problem or '')
 
     def on_parameters_set(self, parameters) -> None:
         self.params.update({p.name: p.value for p in parameters})

@@ -10,14 +10,20 @@ Usage in a node constructor::
     self.params = declare_parameters(self, PARAMETERS)   # {'rate_hz': 50.0, ...}
 
 rclpy then rejects runtime sets of the wrong type, out of range or read-only
-(``SetParametersResult(successful=False)``); a node validates relations between parameters in
-an on-set callback and applies accepted values in a post-set callback.
+(``SetParametersResult(successful=False)``); a node validates relations between parameters with
+`check_parameter_sets` and applies accepted values in a post-set callback.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.node import Node
 
 
@@ -56,3 +62,25 @@ def declare_parameters(node: Node, parameters: tuple[Parameter, ...]) -> dict[st
         p.name: node.declare_parameter(p.name, p.default, p.descriptor()).value
         for p in parameters
     }
+
+
+def check_parameter_sets(node: Node, values: dict[str, Any],
+                         check: Callable[[dict[str, Any]], Any]) -> None:
+    """Reject a runtime set of ``node``'s parameters that ``check`` finds fault with.
+
+    ``check`` gets the node's current ``values`` (the dict `declare_parameters` returned, kept
+    current by the node's post-set callback) with the proposed ones applied, so it can check
+    relations between parameters. It returns why they are wrong (a str) or raises ValueError
+    naming what is wrong; any other result (None, or the configuration it built from them)
+    accepts them. A rejected set changes nothing, and its reason is the set's answer.
+    """
+    def on_set(parameters) -> SetParametersResult:
+        proposed = {**values, **{q.name: q.value for q in parameters}}
+        try:
+            result = check(proposed)
+        except ValueError as err:
+            result = str(err)
+        problem = result if isinstance(result, str) else None
+        return SetParametersResult(successful=problem is None, reason=problem or '')
+
+    node.add_on_set_parameters_callback(on_set)

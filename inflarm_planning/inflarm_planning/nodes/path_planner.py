@@ -52,7 +52,6 @@ import time
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
@@ -60,7 +59,7 @@ from visualization_msgs.msg import MarkerArray
 from inflarm_msgs_json import ObstacleSet, PlanOutcome, PlanRequest
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
@@ -143,13 +142,18 @@ class Result:
     outcome: PlanOutcome
 
 
+def check_planner_parameters(p: dict) -> None:
+    """Raise ValueError naming a bad ``cost`` or ``connectivity``."""
+    check_cost(p['cost'])
+    check_connectivity(p['connectivity'])
+
+
 class PathPlanner(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('path_planner', **kwargs)
         self.params = declare_parameters(self, PARAMETERS)
-        check_cost(self.params['cost'])
-        check_connectivity(self.params['connectivity'])
+        check_planner_parameters(self.params)
         self.frame_id = self.params['frame_id']
         self.model = ObstacleModel((), self.params['min_alert_margin_m'], 0.0)
         self.last_query: PlanQuery | None = None  # what a replan repeats
@@ -181,7 +185,7 @@ class PathPlanner(GuardedCallbacks, Node):
         self.create_guarded_subscription(PointStamped, 'ball_position', self.on_ball_position,
                                          SENSOR_QOS)
         self.create_guarded_service(GetPlan, '~/plan', self.on_plan_service)
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, check_planner_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: frame '{self.frame_id}', alert margin >= "
@@ -190,16 +194,6 @@ class PathPlanner(GuardedCallbacks, Node):
             f"grids up to {self.params['service.max_cells']:.3g} points")
 
     # -- parameters ------------------------------------------------------------------------------
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        checks = {'cost': check_cost, 'connectivity': check_connectivity}
-        for parameter in parameters:
-            if parameter.name in checks:
-                try:
-                    checks[parameter.name](parameter.value)
-                except ValueError as err:
-                    return SetParametersResult(successful=False, reason=str(err))
-        return SetParametersResult(successful=True)
 
     def on_parameters_set(self, parameters) -> None:
         self.params.update({parameter.name: parameter.value for parameter in parameters})

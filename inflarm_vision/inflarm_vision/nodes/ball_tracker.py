@@ -47,14 +47,13 @@ import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from inflarm_model.camera import PinholeCamera
 from inflarm_msgs_json.ros.image import compressed_to_bgr, image_to_bgr, numpy_to_image
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
@@ -143,22 +142,13 @@ class BallTrackerNode(GuardedCallbacks, Node):
         self.create_guarded_subscription(image_type, self.image_topic, self.on_image,
                                          SENSOR_QOS)
         self.create_guarded_timer(self.params['diagnostics_period_s'], self.publish_diagnostics)
-        self.add_on_set_parameters_callback(self.on_set_parameters)
+        check_parameter_sets(self, self.params, settings_from_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: tracking a {self.params['ball_diameter_m'] * 1000:.0f} mm yellow ball on "
             f"{self.image_topic}, publishing ball_position in {self.params['frame_id']}")
 
     # -- parameters ----------------------------------------------------------------------------
-
-    def on_set_parameters(self, parameters) -> SetParametersResult:
-        values = dict(self.params)
-        values.update({p.name: p.value for p in parameters})
-        try:
-            settings_from_parameters(values)
-        except ValueError as err:
-            return SetParametersResult(successful=False, reason=str(err))
-        return SetParametersResult(successful=True)
 
     def on_parameters_set(self, parameters) -> None:
         self.params.update({p.name: p.value for p in parameters})
