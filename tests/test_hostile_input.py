@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import functools
 import json
 import math
+import time
 
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from hypothesis import HealthCheck, given, settings
@@ -252,6 +253,16 @@ def _published(topic):
     return lambda node, out: any(t == topic for t, _ in out)
 
 
+def _integrated(node, out) -> bool:
+    """Whether the trajectory, integrated on the node's worker thread, is being streamed once
+    the stream timer has taken it."""
+    deadline = time.monotonic() + 30.0
+    while node.worker.busy and time.monotonic() < deadline:
+        time.sleep(0.01)
+    node.stream()
+    return node.trajectory is not None
+
+
 NODES = {
     'arm_sim': NodeCase(ArmSim, valid={
         'motor_position_command': (
@@ -270,8 +281,7 @@ NODES = {
         'estimated_wrench': (lambda n: _wrench(n), lambda n, out: n.estimated_force is not None),
         'tip_target': (lambda n: point(0.8, 0.2, 0.1, 'base_link'),
                        _published('motor_position_command')),
-        'tip_trajectory': (lambda n: _path_from_current_tip(n),
-                           lambda n, out: n.trajectory is not None),
+        'tip_trajectory': (lambda n: _path_from_current_tip(n), _integrated),
         'estimated_joint_states': (
             lambda n: JointState(name=list(FlexibleArm.JOINT_NAMES), position=[0.0] * 7),
             lambda n, out: len(n.poses) > 0)}),

@@ -168,7 +168,7 @@ def test_a_path_out_of_reach_or_too_long_is_rejected_whole(executor):
     now = rig.node.get_clock().now()
     # Through (5, 5, 5) m: far beyond 2L; the integrated motors would run away.
     rig.path_pub.publish(path_msg([first, [5.0, 5.0, 5.0]], [0.0, 2.0], now))
-    rig.idle()
+    assert spin_until(executor, lambda: 'tip_trajectory' in rig.node.problems.last)
     assert rig.commands == [] and rig.node.trajectory is None
     assert 'tip strays' in rig.node.problems.last['tip_trajectory'] \
         or 'outside its limits' in rig.node.problems.last['tip_trajectory']
@@ -178,6 +178,34 @@ def test_a_path_out_of_reach_or_too_long_is_rejected_whole(executor):
     assert rig.commands == []
     assert 'over max_duration_s' in rig.node.problems.last['tip_trajectory']
     assert rig.node.problems.unexpected == 0
+
+def test_the_set_point_streams_on_while_a_long_trajectory_is_integrated(executor):
+    # the longest path accepted (600 s, 12,000 steps of eq. 9) takes about a second here: on
+    # the executor it would stop the stream, and a motor watchdog would hold the arm
+    rig = Rig(executor, **{'load.source': 'configured'})
+    rig.joints()
+    first = deflected_tip(Q_M)
+    rig.target(first)
+    assert spin_until(executor, lambda: rig.commands)
+    times = np.linspace(0.0, 600.0, 61)
+    points = first + np.outer(times / 600.0, [-0.05, 0.05, 0.02])
+    rig.path_pub.publish(path_msg(points, times, rclpy.time.Time()))
+    assert spin_until(executor, lambda: rig.node.worker.busy, timeout_s=5.0)
+    during = len(rig.commands)
+    assert spin_until(executor, lambda: not rig.node.worker.busy, timeout_s=60.0)
+    streamed = len(rig.commands) - during
+    assert spin_until(executor, lambda: rig.node.trajectory is not None)
+    assert streamed >= 5, f'{streamed} set points streamed while integrating'
+    # a newer command overtakes a trajectory still being integrated: it is dropped
+    rig.path_pub.publish(path_msg(points, times, rclpy.time.Time()))
+    assert spin_until(executor, lambda: rig.node.worker.busy, timeout_s=5.0)
+    rig.target(first)
+    assert spin_until(executor, lambda: not rig.node.worker.busy, timeout_s=60.0)
+    rig.idle()
+    assert rig.node.trajectory is None
+    np.testing.assert_allclose(deflected_tip(rig.commands[-1].position), first, atol=1e-4)
+    assert rig.node.problems.unexpected == 0
+
 
 def test_resample_keeps_the_waypoints_and_bounds_the_step():
     times = np.array([0.0, 1.0, 1.5])
@@ -202,8 +230,8 @@ def test_a_late_trajectory_is_joined_where_it_is_due_and_relative_stamps_start_n
     assert spin_until(executor, lambda: rig.node.trajectory is None, timeout_s=5.0)
     # Ended before it arrived: rejected, naming why.
     rig.path_pub.publish(path_msg(points, times, now - Duration(seconds=10.0)))
-    rig.idle()
-    assert 'nothing of it is due' in rig.node.problems.last['tip_trajectory']
+    assert spin_until(executor, lambda: 'nothing of it is due'
+                      in rig.node.problems.last.get('tip_trajectory', ''))
     # Stamped from 0: relative, it starts when it is solved.
     rig.path_pub.publish(path_msg(points, times, rclpy.time.Time()))
     assert spin_until(executor, lambda: rig.node.trajectory is not None)

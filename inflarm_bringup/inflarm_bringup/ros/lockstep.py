@@ -7,7 +7,9 @@ node's own ``/clock`` subscription), hands each input to the callbacks of the su
 its topic (a message deserialized by rclpy from the CDR bytes), and calls each timer's callback
 when it is due. Publishers are replaced by a capture: a published message becomes canonical CDR
 (`to_cdr`) with its publish time, and is handed on to the nodes under test that subscribe to
-its topic before time moves on. See ``inflarm_bringup.bag_regression`` for why.
+its topic before time moves on. A node's background jobs (`LatestJobWorker`) are waited for
+after each callback: in simulated time computing takes none. See
+``inflarm_bringup.bag_regression`` for why.
 """
 
 from collections import deque
@@ -31,6 +33,7 @@ from rosgraph_msgs.msg import Clock
 
 from inflarm_bringup.bag_regression import INFRASTRUCTURE_TOPICS, NodeIo
 from inflarm_hw.bag import BagMessage, typestore
+from inflarm_msgs_json.ros.worker import LatestJobWorker
 
 __all__ = ['LockstepNodes', 'msgtype_of', 'to_cdr']
 
@@ -242,14 +245,21 @@ class LockstepNodes:
                 if first is not None:
                     heapq.heappush(heap, (first, len(timers) - 1))
 
+        workers = [w for node in self.nodes.values() for w in vars(node).values()
+                   if isinstance(w, LatestJobWorker)]
+
         def deliver(message: BagMessage, to: Sequence[str] | None = None) -> None:
             for name, sub in subscribers.get(message.topic, ()):
                 if to is None or name in to:
                     sub.callback(deserialize_message(message.data, sub.msg_type))
 
         def drain() -> None:
+            for worker in workers:
+                worker.wait()
             while self._pending:
                 deliver(self._pending.popleft())
+                for worker in workers:
+                    worker.wait()
 
         def fire_until(limit_ns: int, inclusive: bool) -> None:
             while heap and (heap[0][0] < limit_ns or (inclusive and heap[0][0] == limit_ns)):

@@ -2,8 +2,10 @@
 (Fig 6, eqs 8-9 of 000_...): the links' deflection under the tip load is compensated.
 
 A ``tip_target`` is solved at once; a ``tip_trajectory`` (poses stamped with the times they
-are due, or from 0 for "from now") is integrated with eq. 9 from the current motor angles; one
-solved late is joined where it is due by then. Either is checked whole before
+are due, or from 0 for "from now") is integrated with eq. 9 from the current motor angles on a
+worker thread (`inflarm_msgs_json.ros.worker`: a 600 s path takes about a second), while the
+set point keeps streaming; one solved late is joined where it is due by then, one overtaken
+by a newer target or trajectory is dropped. Either is checked whole before
 anything is commanded: every motor angle within the joint limits, the model's deflected tip
 within ``max_tip_error_m`` of every waypoint (an unreachable path fails here), the path no
 longer than ``max_duration_s``. The set point is streamed at ``command_rate_hz``, interpolated
@@ -39,6 +41,7 @@ Parameters:
 """
 
 from collections import OrderedDict
+from dataclasses import dataclass
 import math
 
 from geometry_msgs.msg import PointStamped, WrenchStamped
@@ -62,6 +65,7 @@ from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, de
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, RELIABLE_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
+from inflarm_msgs_json.ros.worker import LatestJobWorker
 
 PARAMETERS = ARM_PARAMETERS + (
     Parameter('load.source', 'estimated',
@@ -109,6 +113,23 @@ def check_ik_parameters(values: dict) -> str | None:
     return problem
 
 
+STOP_WAIT_S = 1.0  # how long a stop waits for an integration under way
+
+
+@dataclass(frozen=True)
+class TrajectoryJob:
+    """A checked ``tip_trajectory``, resampled, with what its integration starts from."""
+
+    command: int  # number of the command it answers: a newer command drops it
+    start_ns: int | None  # when its first pose is due [ns]; None: when it is solved
+    times: np.ndarray
+    x_d: np.ndarray
+    v_d: np.ndarray
+    force: np.ndarray
+    q_m: np.ndarray
+    settings: dict
+
+
 def check_motor_path(q_m: np.ndarray) -> None:
     """InputError naming the first set point outside the joint limits."""
     for i, row in enumerate(np.atleast_2d(q_m)):
@@ -133,6 +154,8 @@ class ElastostaticIk(GuardedCallbacks, Node):
         self.pending_wrench: WrenchStamped | None = None  # tip frame, waiting for its pose
         self.trajectory: TrackingResult | None = None
         self.trajectory_velocity: np.ndarray | None = None  # dq_m of each step [rad/s]
+        self.commands = 0  # targets and trajectories received, the newest wins
+        self.worker = LatestJobWorker('elastostatic_ik trajectory', self.integrate)
         self.trajectory_start_ns = 0  # node clock time of the trajectory's first waypoint
         self.set_point: np.ndarray | None = None  # last commanded, re-sent while idle
 
@@ -207,6 +230,7 @@ class ElastostaticIk(GuardedCallbacks, Node):
         q_m = solve_ik(self.arm, target, self.load(), self.params['arm.spring_stiffness'],
                        self.current_motors())
         check_motor_path(q_m)
+        self.commands += 1
         self.trajectory = None
         self.publish_command(q_m)
         self.get_logger().info(
@@ -230,39 +254,63 @@ class ElastostaticIk(GuardedCallbacks, Node):
         if not np.isfinite(x_d).all():
             raise InputError('not finite', 'the path has non-finite positions')
         times, x_d = resample(times, x_d, MAX_EULER_STEP / p['gain_per_s'])
-        v_d = np.gradient(x_d, times, axis=0)
+        force, q_m = self.load(), self.current_motors()
+        self.commands += 1
+        # Each waypoint is due at its stamp, as a JointTrajectoryController reads a trajectory;
+        # stamps from 0 are relative: the path starts when it is solved.
+        self.worker.submit(TrajectoryJob(
+            self.commands, int(stamps[0]) if stamps[0] > 0 else None, times, x_d,
+            np.gradient(x_d, times, axis=0), force, q_m, dict(p)))
+
+    def integrate(self, job: TrajectoryJob) -> tuple[TrajectoryJob, TrackingResult]:
+        """Eq. 9 along the job's path, checked whole (worker thread)."""
+        p = job.settings
         result = track_trajectory(
-            self.arm, times, x_d, v_d, self.load(), p['arm.spring_stiffness'],
-            self.current_motors(), p['gain_per_s'], method=p['method'])
+            self.arm, job.times, job.x_d, job.v_d, job.force, p['arm.spring_stiffness'],
+            job.q_m, p['gain_per_s'], method=p['method'])
         check_motor_path(result.q_m)
         worst = int(np.argmax(result.tip_error))
         if result.tip_error[worst] > p['max_tip_error_m']:
             raise InputError(
                 'tip error', f'the model tip strays {result.tip_error[worst]:.4g} m from '
-                f"waypoint {x_d[worst].round(4).tolist()} at {times[worst]:.3g} s (over "
+                f"waypoint {job.x_d[worst].round(4).tolist()} at {job.times[worst]:.3g} s (over "
                 f"max_tip_error_m = {p['max_tip_error_m']} m): out of reach or too fast")
-        # Each waypoint is due at its stamp, as a JointTrajectoryController reads a trajectory:
-        # a path that arrives (or is solved) late is joined where it is due now, so the arm is
-        # not late all along it. Stamps from 0 are relative: the path starts now.
+        return job, result
+
+    def on_integrated(self, done: tuple[TrajectoryJob, TrackingResult]) -> None:
+        """Start streaming an integrated trajectory (executor thread)."""
+        job, result = done
+        if job.command != self.commands:
+            self.get_logger().info('tip_trajectory dropped: a newer command replaced it')
+            return
+        # a path solved late is joined where it is due now, so the arm is not late all along it
         now_ns = self.get_clock().now().nanoseconds
-        start_ns = int(stamps[0]) if stamps[0] > 0 else now_ns
+        start_ns = now_ns if job.start_ns is None else job.start_ns
         late_s = (now_ns - start_ns) * 1e-9
-        if late_s >= times[-1]:
-            raise InputError('late', f'the path ended {late_s - times[-1]:.3g} s before it was '
-                                     'solved: nothing of it is due any more')
+        if late_s >= job.times[-1]:
+            raise InputError('late', f'the path ended {late_s - job.times[-1]:.3g} s before it '
+                                     'was solved: nothing of it is due any more')
         self.trajectory = result
         # Eq. 9 was integrated by explicit Euler: each step's motor velocity is its difference.
         self.trajectory_velocity = np.vstack([np.diff(result.q_m, axis=0)
                                               / np.diff(result.times)[:, None], np.zeros(3)])
         self.trajectory_start_ns = start_ns
         self.get_logger().info(
-            f'tip_trajectory of {len(times)} poses over {times[-1]:.2f} s: model tip error '
-            f'at most {result.tip_error.max() * 1000:.3f} mm'
-            + (f', joined {late_s:.3f} s late' if late_s > 0.0 else ''))
+            f'tip_trajectory of {len(job.times)} poses over {job.times[-1]:.2f} s: model tip '
+            f'error at most {result.tip_error.max() * 1000:.3f} mm')
 
     # -- output --------------------------------------------------------------------------------
 
     def stream(self) -> None:
+        for done in self.worker.results():
+            try:
+                if isinstance(done, Exception):
+                    raise done  # what the integration raised
+                self.on_integrated(done)
+            except ValueError as error:
+                self.problems.reject('tip_trajectory', error)
+            except Exception as error:  # noqa: BLE001 (the stream must go on)
+                self.problems.bug('tip_trajectory', error)
         if self.trajectory is None:
             if self.set_point is not None:
                 self.publish_command(self.set_point)
@@ -286,6 +334,11 @@ class ElastostaticIk(GuardedCallbacks, Node):
         self.command_pub.publish(joint_state(
             MOTORS, self.get_clock().now().to_msg(), position=q_m,
             velocity=np.zeros(3) if velocity is None else velocity))
+
+
+    def destroy_node(self) -> None:
+        self.worker.close(STOP_WAIT_S)
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:

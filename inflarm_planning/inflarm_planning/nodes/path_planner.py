@@ -12,9 +12,10 @@ and the message decoder) is rejected by the node's guards with a warning, and no
 published; the service also answers it with a Path without poses and a ``rejected`` outcome.
 
 Threads: requests from the ``plan_request`` topic and replans are planned on one daemon worker
-thread (the latest pending request wins; numba's A* kernel runs without the GIL), so the executor
-keeps spinning whatever the resolution; the results are published from the executor thread; a
-stop waits at most ``STOP_WAIT_S`` for a plan under way. The ``~/plan`` service plans inside its
+thread (`inflarm_msgs_json.ros.worker.LatestJobWorker`: the latest pending request wins; numba's
+A* kernel runs without the GIL), so the executor keeps spinning whatever the resolution; the
+results are published from the executor thread; a stop waits at most ``STOP_WAIT_S`` for a plan
+under way. The ``~/plan`` service plans inside its
 callback, which blocks the executor for the plan's duration, so it refuses grids larger than
 ``service.max_cells`` (default: 2 mm and coarser).
 
@@ -43,10 +44,8 @@ Parameters:
     max_cells (read-only).
 """
 
-from collections import deque
 from dataclasses import dataclass
 import math
-import threading
 import time
 
 from geometry_msgs.msg import PointStamped
@@ -63,6 +62,7 @@ from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, de
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
+from inflarm_msgs_json.ros.worker import LatestJobWorker
 from inflarm_planning.astar import NoPathError
 from inflarm_planning.collision import CHECK_STEP
 from inflarm_planning.free_space import MAX_CELLS
@@ -162,13 +162,8 @@ class PathPlanner(GuardedCallbacks, Node):
         self.position_time_ns = 0
         self.last_request: PlanQuery | None = None  # accepted from the topic
 
-        self._lock = threading.Lock()
-        self._next_job: Job | None = None
-        self._busy = False
-        self._closing = False
-        self._results: deque[Result] = deque()
-        self._worker: threading.Thread | None = None
         self._done = self.create_guard_condition(self.problems.guard('results', self.on_results))
+        self.worker = LatestJobWorker('path_planner worker', self.run, self._done.trigger)
 
         self.path_pub = self.create_publisher(
             Path, 'planned_path', LATCHED_QOS, event_callbacks=publisher_events(
@@ -271,37 +266,10 @@ class PathPlanner(GuardedCallbacks, Node):
     # -- planning --------------------------------------------------------------------------------
 
     def submit(self, job: Job) -> None:
-        """Plan ``job`` on the worker thread; a newer job replaces one still waiting."""
-        with self._lock:
-            if self._closing:
-                return
-            replaced = self._next_job is not None
-            self._next_job = job
-            start = not self._busy
-            self._busy = True
-        if replaced:
+        """Plan ``job`` on the worker thread; a newer job replaces one still waiting (a stop
+        during a long plan, a 1 mm grid build takes seconds, is not held up by it)."""
+        if self.worker.submit(job):
             self.get_logger().info('a newer request replaces the one waiting')
-        if start:
-            # a daemon: a stop during a long plan (a 1 mm grid build takes seconds) is not held
-            # up by it; after a stop it finishes its plan and publishes nothing
-            self._worker = threading.Thread(target=self._work, name='path_planner worker',
-                                            daemon=True)
-            self._worker.start()
-
-    def _work(self) -> None:
-        while True:
-            with self._lock:
-                job, self._next_job = self._next_job, None
-                if job is None or self._closing:
-                    self._busy = False
-                    return
-            result = self.run(job)
-            with self._lock:
-                if self._closing:
-                    self._busy = False
-                    return
-                self._results.append(result)
-                self._done.trigger()
 
     def run(self, job: Job) -> Result:
         """Plan one job (any thread): never raises, the error goes into the outcome."""
@@ -341,11 +309,9 @@ class PathPlanner(GuardedCallbacks, Node):
             planning_time=elapsed))
 
     def on_results(self) -> None:
-        while True:
-            with self._lock:
-                if not self._results:
-                    return
-                result = self._results.popleft()
+        for result in self.worker.results():
+            if isinstance(result, Exception):
+                raise result  # run() catches what planning raises: a bug, reported by the guard
             self.publish_result(result)
 
     def publish_result(self, result: Result) -> Path | None:
@@ -375,11 +341,7 @@ class PathPlanner(GuardedCallbacks, Node):
             self.get_clock().now().to_msg()))
 
     def destroy_node(self) -> None:
-        with self._lock:
-            self._closing = True
-            self._next_job = None
-        if self._worker is not None:
-            self._worker.join(timeout=STOP_WAIT_S)  # a short plan under way may still finish
+        self.worker.close(STOP_WAIT_S)  # a short plan under way may still finish
         super().destroy_node()
 
 
