@@ -3,7 +3,7 @@
 
 A ``tip_target`` is solved at once; a ``tip_trajectory`` (poses stamped with the times they
 are due, or from 0 for "from now") is integrated with eq. 9 from the current motor angles on a
-worker thread (`inflarm_msgs_json.ros.worker`: a 600 s path takes about a second), while the
+worker thread (`inflarm_msgs_json.ros.worker`: the longest paths take seconds), while the
 set point keeps streaming; one solved late is joined where it is due by then, one overtaken
 by a newer target or trajectory is dropped. Either is checked whole before
 anything is commanded: every motor angle within the joint limits, the model's deflected tip
