@@ -184,19 +184,19 @@ def bridge_config(p: dict) -> BridgeConfig:
         chamber_valve=valve, link_valve=valve)
 
 
-def check_bridge_parameters(p: dict) -> None:
-    """Raise ValueError naming the first bad parameter (the driver's only with a ``port``)."""
-    bridge_config(p)
-    if p['port']:
-        driver_config(p)
-
-
 def driver_config(p: dict) -> DriverConfig:
     """The driver configuration of the parameter values ``p``; ``ValueError`` if invalid."""
     if not p['port']:
         raise ValueError('port is not set: pass the MCU serial device, e.g. -p port:=/dev/pts/5')
     return DriverConfig(p['port'], p['baudrate'], p['handshake_timeout_s'], p['link_timeout_s'],
                         p['mcu_watchdog_s'])
+
+
+def check_bridge_parameters(p: dict) -> None:
+    """Raise ValueError naming the first bad parameter (the driver's only with a ``port``)."""
+    bridge_config(p)
+    if p['port']:
+        driver_config(p)
 
 
 class HwBridge(GuardedCallbacks, LifecycleNode):
