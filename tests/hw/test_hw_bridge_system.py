@@ -137,10 +137,12 @@ def test_mcu_silence_and_link_loss_are_safe_and_the_bridge_reconnects(
     rig.pressures = {'B2': 30e3}
     rig.wait_status(lambda s: s.valves == 'follow' and s.link == 'connected', 20.0)
 
-    # damaged bytes and CRCs are dropped, the link stays up
-    rig.inject('corrupt_crc', 0, 0.2, 1.0)
+    # damaged bytes and CRCs are dropped, the link stays up: a fifth of the frames corrupted
+    # until five have been (not for a fixed time: a busy machine sends fewer frames in it)
+    rig.inject('corrupt_crc', 0, 0.2)
     status = rig.wait_status(lambda s: s.bad_frames >= 5)[1]
     assert status.link == 'connected' and status.valves == 'follow'
+    rig.inject('clear')
     rig.inject('drop_bytes', 0, 0.005, 1.0)
     rig.run(lambda: False, 1.2)
     assert rig.status.link == 'connected'
