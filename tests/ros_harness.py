@@ -57,7 +57,11 @@ def wait_until(predicate: Callable[[], bool], timeout_s: float = 10.0) -> bool:
 
 class BaseFrameForces:
     """Estimated tip forces in the base frame, from ``estimated_wrench`` (tip frame) and the
-    ``estimated_joint_states`` of the same stamp, as a tf2 user would turn them."""
+    ``estimated_joint_states`` of the same stamp, as a tf2 user would turn them.
+
+    Either topic may lose a message the other has (its subscription matched later, or a
+    reader queue overran on a loaded machine): such a message is dropped once a newer stamp
+    has been paired, since the stamps only grow."""
 
     def __init__(self, node, arm=None) -> None:
         from geometry_msgs.msg import WrenchStamped
@@ -67,7 +71,7 @@ class BaseFrameForces:
         from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS
         self.arm = arm or FlexibleArm()
         self.poses: dict[tuple[int, int], list[float]] = {}
-        self.wrenches: list = []
+        self.wrenches: dict[tuple[int, int], object] = {}
         self.forces: list = []  # (stamp [s], force (3,) [N])
         node.create_subscription(JointState, 'estimated_joint_states', self._on_pose,
                                  JOINT_STATE_QOS)
@@ -83,18 +87,20 @@ class BaseFrameForces:
         self._pair()
 
     def _on_wrench(self, msg) -> None:
-        self.wrenches.append(msg)
+        self.wrenches[self._key(msg.header.stamp)] = msg
         self._pair()
 
     def _pair(self) -> None:
         import numpy as np
-        while self.wrenches and self._key(self.wrenches[0].header.stamp) in self.poses:
-            wrench = self.wrenches.pop(0)
-            q = self.poses.pop(self._key(wrench.header.stamp))
-            f = wrench.wrench.force
-            rotation = self.arm.fk(q)[:3, :3]
-            stamp = wrench.header.stamp.sec + wrench.header.stamp.nanosec * 1e-9
-            self.forces.append((stamp, rotation @ np.array([f.x, f.y, f.z])))
+        paired = sorted(self.wrenches.keys() & self.poses.keys())
+        for key in paired:
+            f = self.wrenches.pop(key).wrench.force
+            rotation = self.arm.fk(self.poses.pop(key))[:3, :3]
+            self.forces.append((key[0] + key[1] * 1e-9, rotation @ np.array([f.x, f.y, f.z])))
+        if paired:
+            for unpaired in (self.wrenches, self.poses):
+                for key in [k for k in unpaired if k < paired[-1]]:
+                    del unpaired[key]
 
     def __len__(self) -> int:
         return len(self.forces)
