@@ -18,10 +18,10 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    resolution and quantizes it coarsely, and the ball-blind channel is mostly chroma: where
    the fine pass finds less than 90 % of the outline, it is measured again in **luma** (full
    resolution; each ray's inside level measured, either polarity), the better kept; luma is
-   also the last resort of the coarse pass. On each ray the edge is where the
-   signal crosses half-way between the inside and outside levels (`_edges`); a ray counts only
-   if it is inside the ball just before its edge. The edge points are moved out by the blur's
-   shift of a curved edge, ``sigma^2 / (2 r)``.
+   also the last resort of the coarse pass, and the coarse channel that of the fine pass. On
+   each ray the edge is where the signal crosses half-way between the inside and outside
+   levels (`_edges`); a ray counts only if it is inside the ball just before its edge. The
+   edge points are moved out by the blur's shift of a curved edge, ``sigma^2 / (2 r)``.
 3. **Fit** (`_fit_outline`): a consensus circle through triples of edge points, least squares
    through its points without the far ones, an ellipse when 85 % of the outline is on it.
    ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
@@ -296,8 +296,9 @@ def _line_at(values: npt.NDArray, offset, weights: npt.NDArray | None = None) ->
     if weights is None:
         weights = np.ones_like(values)
     count = weights.sum(axis=1)
-    mean_j = (weights @ j) / count
-    mean_v = (weights * values).sum(axis=1) / count
+    per_sample = 1.0 / np.maximum(count, 1.0)  # a row without samples gives 0 (unused)
+    mean_j = (weights @ j) * per_sample
+    mean_v = (weights * values).sum(axis=1) * per_sample
     dj = j[None, :] - mean_j[:, None]
     sjj = (weights * dj * dj).sum(axis=1)
     slope = np.where(count >= 3, (weights * dj * values).sum(axis=1) / np.maximum(sjj, 1e-12),
@@ -327,7 +328,8 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     ``sigma`` is given (tracking: the blur measured a few frames ago); with ``min_contrast``
     the signal may fall as well as rise across the edge, by that much at least. Then the
     outside level is extrapolated to that edge from a line through the samples just beyond the
-    blurred edge (texture gradients), averaged over neighbouring rays, and so is the inside
+    blurred edge (texture gradients; those in the image, at least a third of the window: a
+    ball near the border), averaged over neighbouring rays, and so is the inside
     level unless it is known (``inside_level``: 0 in the ball-blind channel, however the ball
     is shaded), and the edge is found again between those levels. Finally it is moved out by
     ``sigma^2 / (2 rho)``, by which blur moves the half-way level of a convex outline of
@@ -354,20 +356,24 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     gap = int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
     valid = np.isfinite(edge)
     k = np.rint((np.where(valid, edge, r0) - t0) / _STEP).astype(np.int64)
-    valid &= (k >= gap) & (k < usable - gap - length)
+    # the window beyond the edge may be cut by the image's border, to a third of its length
+    valid &= (k >= gap) & (k < usable - gap - length // 3)
     if not valid.any():
         return np.full(n_rays, np.nan), sigma
     k = np.where(valid, k, gap)
     e = t0 + _STEP * k
     flat = signal.ravel()
-    at = (np.arange(0, n_rays * n_t, n_t) + k)[:, None]  # flat index of each ray's edge sample
-    beyond = flat[at + (gap + np.arange(length))]
+    rows = np.arange(0, n_rays * n_t, n_t)[:, None]
+    at = rows + k[:, None]  # flat index of each ray's edge sample
+    beyond_k = k[:, None] + gap + np.arange(length)
+    beyond = flat[rows + np.minimum(beyond_k, n_t - 1)]
+    beyond_ray = (beyond_k < np.reshape(usable, (-1, 1))).astype(np.float64)
     # the window before the edge ends a gap inside it, and starts at the ray's first sample
     # at the earliest
     offsets = -(gap + length - 1) + np.arange(length)
     inside_ray = (k[:, None] + offsets[None, :] >= 0).astype(np.float64)
     before = flat[at + np.maximum(offsets[None, :], -k[:, None])]
-    hi = _circular_mean(_line_at(beyond, gap), valid)
+    hi = _circular_mean(_line_at(beyond, gap, beyond_ray), valid)
     if inside_level is None:
         lo = _circular_mean(_line_at(before, -(gap + length - 1), inside_ray), valid)
     # a ray crosses the ball's edge only if it is still inside the ball before it: its own
@@ -670,14 +676,21 @@ def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: flo
           sigma: float | None = None) -> BallDetection | None:
     """The fine pass (`_refine_at` in the ball-blind channel), and again in luma when it finds
     less than `_CONFIDENT` of the outline (JPEG's chroma: half the resolution, coarser
-    quantization): the one of higher confidence."""
+    quantization), then in the coarse channel when neither reaches ``min_confidence`` (a
+    surround that differs from the ball mostly in brightness, e.g. a dark sky on one side and a
+    bright bar on the other): the one of higher confidence."""
     fine = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
                       sigma=sigma).detection
     if fine is None or fine.confidence < _CONFIDENT:
         in_luma = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
                              sigma=sigma, channel='luma').detection
         if in_luma is not None and (fine is None or in_luma.confidence > fine.confidence):
-            return in_luma
+            fine = in_luma
+    if fine is None or fine.confidence < params.min_confidence:
+        coarse = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
+                            sigma=sigma, channel='coarse').detection
+        if coarse is not None and (fine is None or coarse.confidence > fine.confidence):
+            fine = coarse
     return fine
 
 

@@ -45,3 +45,30 @@ def test_no_ball_is_found_in_the_ball_free_photographs(quality):
         if detection is not None:
             found.append((seed, detection.center.round(1), round(detection.radius, 1)))
     assert found == []
+
+
+def test_a_ball_just_inside_the_image_border_is_found():
+    # 2-4 px between its outline and the border: the windows beyond its edge are cut there
+    found, cases = 0, 0
+    for seed in range(24):
+        case = real_case(seed, None, radius_px=30.0, occlusion=0.0, defocus_px=0.0, motion_px=0.0)
+        for gap_px in (2.0, 4.0):
+            right = int(np.ceil(case.center[0] + case.radius + gap_px))
+            if right >= case.image.shape[1]:
+                continue
+            detection = detect_ball(np.ascontiguousarray(case.image[:, :right]))
+            cases += 1
+            found += (detection is not None
+                      and np.hypot(*(detection.center - case.center)) < 0.5)
+    assert cases >= 40 and found >= 0.9 * cases, (found, cases)  # 83 % before the cut windows
+
+
+def test_a_ball_a_quarter_hidden_by_a_bar_is_found():
+    found = 0
+    for seed in range(60):
+        case = real_case(seed, None, occlusion=0.25, radius_px=40.0, defocus_px=0.0,
+                         motion_px=0.0)
+        detection = detect_ball(case.image)
+        found += detection is not None and np.hypot(*(detection.center - case.center)) < 1.0
+    # 83 % before the coarse channel became the fine pass's last resort
+    assert found >= 0.85 * 60, found
