@@ -679,18 +679,15 @@ def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: flo
     quantization), then in the coarse channel when neither reaches ``min_confidence`` (a
     surround that differs from the ball mostly in brightness, e.g. a dark sky on one side and a
     bright bar on the other): the one of higher confidence."""
-    fine = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
-                      sigma=sigma).detection
-    if fine is None or fine.confidence < _CONFIDENT:
-        in_luma = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
-                             sigma=sigma, channel='luma').detection
-        if in_luma is not None and (fine is None or in_luma.confidence > fine.confidence):
-            fine = in_luma
-    if fine is None or fine.confidence < params.min_confidence:
-        coarse = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
-                            sigma=sigma, channel='coarse').detection
-        if coarse is not None and (fine is None or coarse.confidence > fine.confidence):
-            fine = coarse
+    fine = None
+    for channel, enough in (('blind', math.inf), ('luma', _CONFIDENT),
+                            ('coarse', params.min_confidence)):
+        if fine is not None and fine.confidence >= enough:
+            continue
+        found = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
+                           sigma=sigma, channel=channel).detection
+        if found is not None and (fine is None or found.confidence > fine.confidence):
+            fine = found
     return fine
 
 
