@@ -1,6 +1,6 @@
 """``inflarm-demo``: the whole simulated system, end to end, in under three minutes.
 
-    inflarm-demo [--out DIR] [--backend sim|sim_mcu] [--timeout S] [--view]
+    inflarm-demo [--out DIR] [--backend sim|sim_mcu] [--timeout S] [--seed N] [--view]
                  [--bag-storage sqlite3|mcap]
 
 Starts the ``sim`` system (``inflarm_bringup.systems``: both simulated arms, the camera, the
@@ -30,6 +30,10 @@ region), ``soft_arm_clearance.png`` (Fig 12: distance to the obstacle surface ag
 ``inflatable_arm_tip.png`` (the tip's path and its error), ``inflatable_arm_motors.png``
 (Fig 11 of 000: motor angles with and without deflection compensation), ``nodes.log`` (every
 node's output) and ``bag/`` (rosbag2). Exit code 0 when every target of the table is met.
+
+``--seed`` seeds the simulators (default 0; -1 for a random seed): their sensor noise and the
+simulated camera's background, whose texture biases the ball's measured depth by up to a few
+millimetres where the ball's outline crosses it, so a seed gives the same scene every run.
 
 ``--bag-storage mcap`` records the bag as MCAP, which Foxglove opens directly.
 
@@ -76,6 +80,7 @@ ARM_TRAVERSE_S = 6.0
 ARM_LEAD_S = 0.5  # a path is due this long after it is sent
 ARM_TIP_TARGET_M = 0.002
 ARM_LOAD_TARGET = 0.05  # relative
+SIMULATORS = ('arm_sim', 'sra_sim', 'sim_mcu')  # the nodes --seed seeds
 # Knowledge points around the scenario (x, y -10..140 mm, z 700..740 mm): 1,280 of the paper's
 # 1 cm grid, a few seconds to learn.
 KNOWLEDGE_ORIGIN, KNOWLEDGE_SHAPE = (-0.01, -0.01, 0.70), (16, 16, 5)
@@ -556,6 +561,19 @@ def plot(mission, figures: Figures, out: pathlib.Path) -> list[pathlib.Path]:
 
 # -- the run ----------------------------------------------------------------------------------
 
+def demo_nodes(backend: Backend, knowledge: pathlib.Path, seed: int, bag: pathlib.Path,
+               bag_storage: str) -> tuple[NodeProcess, ...]:
+    """The ``sim`` system's nodes, the simulators seeded with ``seed``, the pressure
+    controller on the ``knowledge`` database, and the recorder of the ``bag``."""
+    ours = {'pressure_controller': {'knowledge_db_path': str(knowledge)},
+            **{simulator: {'seed': seed} for simulator in SIMULATORS}}
+    return tuple(replace(n, parameters={**n.parameters, **ours.get(n.executable, {})})
+                 for n in system_nodes('sim', backend)) + (
+        NodeProcess('inflarm_hw', 'bag_recorder', parameters={
+            'topics': list(RECORDED_TOPICS), 'output': str(bag.resolve()),
+            'storage': bag_storage}),)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='inflarm-demo',
                                      description=__doc__.splitlines()[0].split(': ', 1)[1])
@@ -564,6 +582,8 @@ def main(argv: list[str] | None = None) -> int:
                         help='the robots: simulators, or the bridge on a simulated MCU')
     parser.add_argument('--timeout', type=float, default=170.0,
                         help='give up after this long [s] (default %(default)s)')
+    parser.add_argument('--seed', type=int, default=0,
+                        help='seed of the simulators (default %(default)s; -1: random)')
     parser.add_argument('--bag-storage', default='sqlite3', choices=('sqlite3', 'mcap'),
                         help="the bag's storage (default %(default)s; mcap for Foxglove)")
     parser.add_argument('--view', action='store_true',
@@ -585,12 +605,8 @@ def main(argv: list[str] | None = None) -> int:
     knowledge = build_knowledge(out / 'knowledge.db')
     print(f'[demo] knowledge database of the scenario region built in '
           f'{time.monotonic() - started:.1f} s', flush=True)
-    nodes = tuple(replace(n, parameters={**n.parameters, 'knowledge_db_path': str(knowledge)})
-                  if n.executable == 'pressure_controller' else n
-                  for n in system_nodes('sim', Backend(args.backend, port))) + (
-        NodeProcess('inflarm_hw', 'bag_recorder', parameters={
-            'topics': list(RECORDED_TOPICS), 'output': str((out / 'bag').resolve()),
-            'storage': args.bag_storage}),)
+    nodes = demo_nodes(Backend(args.backend, port), knowledge, args.seed, out / 'bag',
+                       args.bag_storage)
     if args.view:
         view = live_view_node(Backend(args.backend, port), args.view_host, args.view_port)
         nodes += (view,)
