@@ -96,6 +96,44 @@ def test_images_show_the_ball_at_the_end_point_stamped_at_capture(executor):
     assert abs(detection.radius - 450.0 * 0.02 / 1.1) < 0.3
 
 
+def test_frames_leave_in_capture_order_when_a_later_one_is_due_first(executor):
+    # A frame due at capture (its render outlasted the latency; here the latency was lowered)
+    # while an earlier one waits: both leave now, the earlier first (before, the later frame
+    # left alone, and a system test on a busy machine took a stamp 0.2 s past its last truth).
+    sim_time = Parameter('use_sim_time', value=True)
+    sim = SraSim(context=executor.context, parameter_overrides=[
+        sim_time, Parameter('camera_rate_hz', value=10.0),
+        Parameter('camera.latency_s', value=0.15), Parameter('camera.width', value=160),
+        Parameter('camera.height', value=120), Parameter('camera.focal_px', value=225.0)])
+    probe = rclpy.create_node('probe', context=executor.context, parameter_overrides=[sim_time])
+    clock_pub = probe.create_publisher(Clock, '/clock', 10)
+    published: list[int] = []  # the stamps [ns] of the images, in the order they left
+    publish = sim.camera.publish
+    sim.camera.publish = lambda image, info: (
+        published.append(Time.from_msg(image.header.stamp).nanoseconds), publish(image, info))
+    renders: list[int] = []  # the simulated times [ns] of the captures
+    render = sim.camera.renderer.render
+    sim.camera.renderer.render = lambda *a, **k: (
+        renders.append(sim.get_clock().now().nanoseconds), render(*a, **k))[1]
+    probe.create_subscription(Image, 'camera/image_raw', lambda _: None, SENSOR_QOS)
+    executor.add_node(sim)
+    executor.add_node(probe)
+    assert spin_until(executor, lambda: clock_pub.get_subscription_count() >= 2, timeout_s=15.0)
+    assert spin_until(executor, lambda: sim.camera.image_pub.get_subscription_count() == 1)
+    now_ns = 1_000_000_000
+    step_clock(executor, clock_pub, [sim, probe], now_ns)
+    while not renders:  # the first frame, waiting for its 0.15 s
+        now_ns += STEP_NS
+        step_clock(executor, clock_pub, [sim, probe], now_ns)
+    assert published == []
+    sim.set_parameters([Parameter('camera.latency_s', value=0.0)])
+    while len(renders) == 1:  # the second, 0.1 s later: due at once
+        now_ns += STEP_NS
+        step_clock(executor, clock_pub, [sim, probe], now_ns)
+    assert renders[1] < renders[0] + 150_000_000  # before the first fell due
+    assert published == renders
+
+
 def test_no_images_without_a_subscriber_and_none_when_disabled(executor):
     sim = SraSim(context=executor.context, parameter_overrides=[
         Parameter('camera_rate_hz', value=20.0)])

@@ -5,7 +5,7 @@ executable).
 `inflarm_hw.synthetic_camera` and publishes, on the node:
 
     camera/image_raw (sensor_msgs/Image, bgr8, SENSOR_QOS), with ``camera.transport`` raw:
-        stamped with the capture time, published ``camera.latency_s`` later.
+        stamped with the capture time, published ``camera.latency_s`` later, in capture order.
     camera/image_raw/compressed (sensor_msgs/CompressedImage, JPEG, SENSOR_QOS), with
         ``camera.transport`` compressed, instead: the same images, stamps and latency, JPEG at
         ``camera.jpeg_quality`` (format ``bgr8; jpeg compressed bgr8``, as image_transport's
@@ -41,6 +41,7 @@ Parameters (`CAMERA_PARAMETERS`, declared by the node with its own; the defaults
         runtime.
 """
 
+import collections
 from collections.abc import Callable
 
 import numpy as np
@@ -141,7 +142,9 @@ class CameraPublisher:
         self.info_pub = node.create_publisher(CameraInfo, 'camera/camera_info', SENSOR_QOS)
         self.timer = node.create_guarded_timer(1.0 / params['camera_rate_hz'], self.capture,
                                                name='camera')
-        self._pending: list = []  # one-shot timers of frames waiting for their latency
+        # frames waiting for their latency, oldest first: (capture number, image, info)
+        self._queue: collections.deque = collections.deque()
+        self._captured = 0
 
     def capture(self) -> None:
         if self.image_pub.get_subscription_count() == 0:
@@ -158,20 +161,30 @@ class CameraPublisher:
             image = numpy_to_image(frame.image, 'bgr8', header)
         info = CameraInfo(**self.renderer.camera.camera_info_fields())
         info.header = header
+        self._captured += 1
+        number = self._captured
+        self._queue.append((number, image, info))
         remaining = self.params['camera.latency_s'] - (
             self.node.get_clock().now() - stamp).nanoseconds * 1e-9
         if remaining <= 0.0:
-            self.publish(image, info)
+            self._publish_through(number)
             return
         holder: list = []
 
         def deliver() -> None:
-            self.publish(image, info)
             self.node.destroy_timer(holder[0])
-            self._pending.remove(holder[0])
+            self._publish_through(number)
 
         holder.append(self.node.create_guarded_timer(remaining, deliver, name='camera'))
-        self._pending.append(holder[0])
+
+    def _publish_through(self, number: int) -> None:
+        """Publish the frames up to capture ``number``, in capture order: a frame that is due
+        takes the earlier ones still waiting along (their render outlasted the latency, or the
+        latency was lowered): a process that ran late would otherwise send a later stamp
+        before an earlier one, as no camera does."""
+        while self._queue and self._queue[0][0] <= number:
+            _, image, info = self._queue.popleft()
+            self.publish(image, info)
 
     def publish(self, image: Image | CompressedImage, info: CameraInfo) -> None:
         self.image_pub.publish(image)
