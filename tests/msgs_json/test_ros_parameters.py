@@ -1,10 +1,11 @@
-"""check_parameter_sets: a runtime set is checked with the node's other values, rejected with
-the check's reason, and a rejected set changes nothing."""
+"""declare_parameters: the returned values follow accepted runtime sets, then on_set gets what
+changed; a set is checked with the node's other values, rejected with the check's reason, and a
+rejected set changes nothing."""
 
 import rclpy
 from rclpy.parameter import Parameter as RclpyParameter
 
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 
 PARAMETERS = (
     Parameter('low_m', 0.1, 'lower bound [m]'),
@@ -24,13 +25,21 @@ def raising(values: dict) -> dict:
     return values  # a configuration built from them: accepted
 
 
-def node_with(check, context):
+def node_with(check, context, on_set=None):
     node = rclpy.create_node('checked', context=context)
-    values = declare_parameters(node, PARAMETERS)
-    check_parameter_sets(node, values, check)
-    node.add_post_set_parameters_callback(
-        lambda parameters: values.update({q.name: q.value for q in parameters}))
-    return node, values
+    return node, declare_parameters(node, PARAMETERS, check=check, on_set=on_set)
+
+
+def test_on_set_gets_what_changed_after_the_values_follow_it(executor):
+    seen = []
+    node, values = node_with(None, executor.context,
+                             on_set=lambda changed: seen.append((changed, dict(values))))
+    assert node.set_parameters([RclpyParameter('high_m', value=0.8)])[0].successful
+    assert seen == [({'high_m': 0.8}, {'low_m': 0.1, 'high_m': 0.8})]
+    # a parameter rclpy declares itself is not one of the table's: no call
+    assert node.set_parameters([RclpyParameter('use_sim_time', value=True)])[0].successful
+    assert len(seen) == 1 and 'use_sim_time' not in values
+    node.destroy_node()
 
 
 def test_a_set_is_checked_against_the_values_it_leaves_unchanged(executor):

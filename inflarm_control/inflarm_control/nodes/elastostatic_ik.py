@@ -61,7 +61,7 @@ from inflarm_model.nodes.arm_parameters import (
 from inflarm_model.ros_conversions import joint_arrays, joint_state
 from inflarm_model.urdf import TIP_LINK, check_joint_positions
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, RELIABLE_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
@@ -143,7 +143,7 @@ class ElastostaticIk(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('elastostatic_ik', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, check=check_ik_parameters)
         problem = check_ik_parameters(self.params)
         if problem is not None:
             raise ValueError(problem)
@@ -171,9 +171,6 @@ class ElastostaticIk(GuardedCallbacks, Node):
             JointState, 'motor_position_command', COMMAND_QOS,
             event_callbacks=publisher_events(self, 'motor_position_command'))
         self.create_guarded_timer(1.0 / self.params['command_rate_hz'], self.stream)
-        check_parameter_sets(self, self.params, check_ik_parameters)
-        self.add_post_set_parameters_callback(
-            lambda parameters: self.params.update({q.name: q.value for q in parameters}))
         self.get_logger().info(f"ready: load from {self.params['load.source']}")
 
     # -- inputs --------------------------------------------------------------------------------

@@ -229,13 +229,9 @@ class PressureController(GuardedCallbacks, Node):
         self.create_guarded_service(Trigger, '~/vent', self.on_vent)
         self.create_guarded_service(Trigger, '~/reset_learning', self.on_reset_learning)
         self.create_guarded_timer(self.dt, self.step)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: {p['rate_hz']} Hz, {len(self.memories)} ILC memories, knowledge database "
             f"{'loaded' if self.knowledge is not None else 'none'}")
-
-    def on_parameters_set(self, parameters) -> None:
-        self.params.update({parameter.name: parameter.value for parameter in parameters})
 
     # -- inputs --------------------------------------------------------------------------------
 

@@ -62,8 +62,6 @@ class TrialRunner(GuardedCallbacks, Node):
         self.create_guarded_subscription(String, 'trial_report', self.on_report, RELIABLE_QOS)
         self.vent_client = self.create_client(Trigger, 'pressure_controller/vent')
         self.create_guarded_timer(0.2, self.tick)
-        self.add_post_set_parameters_callback(
-            lambda parameters: self.params.update({q.name: q.value for q in parameters}))
         self.get_logger().info(f"ready: {p['trials']} {p['mode']} trials to {p['target']}")
 
     def enter(self, phase: str) -> None:

@@ -76,7 +76,7 @@ from inflarm_msgs_json.ros.diagnostics import (
     diagnostic_status,
 )
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS, subscription_events
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -113,7 +113,8 @@ class LoadEstimator(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('load_estimator', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, check=check_arm_parameters,
+                                         on_set=self.on_parameters_set)
         problem = check_arm_parameters(self.params)
         if problem is not None:
             raise ValueError(problem)
@@ -144,8 +145,6 @@ class LoadEstimator(GuardedCallbacks, Node):
         self.diagnostics = DiagnosticsPublisher(self, self.diagnostic_status)
         self.create_guarded_timer(1.0 / self.params['link_status_rate_hz'],
                                   self.publish_link_status)
-        check_parameter_sets(self, self.params, check_arm_parameters)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info('ready: estimating the tip load from joint_states')
 
     def make_tracker(self) -> LoadTracker:
@@ -155,8 +154,7 @@ class LoadEstimator(GuardedCallbacks, Node):
                            max_torque_step=p['jump.torque_step_nm'],
                            max_condition=p['max_condition_number'], max_force=p['max_force_n'])
 
-    def on_parameters_set(self, parameters) -> None:
-        self.params.update({q.name: q.value for q in parameters})
+    def on_parameters_set(self, changed: dict) -> None:
         self.tracker = self.make_tracker()  # a new model: the history no longer applies
 
     def on_message_lost(self, event) -> None:

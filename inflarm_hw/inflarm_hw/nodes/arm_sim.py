@@ -47,7 +47,7 @@ from inflarm_hw.realtime import ElapsedSteps
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.ros_conversions import joint_arrays, joint_state
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, JOINT_STATE_QOS, SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
@@ -70,7 +70,9 @@ class ArmSim(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('arm_sim', **kwargs)
-        self.params = p = declare_parameters(self, PARAMETERS)
+        self.params = p = declare_parameters(self, PARAMETERS,
+                                             check=check_arm_plant_parameters,
+                                             on_set=self.on_parameters_set)
         problem = check_arm_plant_parameters(p)
         if problem is not None:
             raise ValueError(problem)
@@ -89,14 +91,11 @@ class ArmSim(GuardedCallbacks, Node):
         self.tip_pub = self.create_publisher(PointStamped, 'tip_position_truth', SENSOR_QOS)
         self.spring_pub = self.create_publisher(JointState, 'spring_states_truth', SENSOR_QOS)
         self.create_guarded_timer(self.dt, self.step)
-        check_parameter_sets(self, self.params, check_arm_plant_parameters)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(f"ready: tip load {p['tip_force_n']} N at {p['rate_hz']} Hz")
 
-    def on_parameters_set(self, parameters) -> None:
-        for q in parameters:
-            self.params[q.name] = q.value
-            change = apply_arm_plant_parameter(self.sim, q.name, q.value)
+    def on_parameters_set(self, changed: dict) -> None:
+        for name, value in changed.items():
+            change = apply_arm_plant_parameter(self.sim, name, value)
             if change is not None:
                 self.get_logger().info(change)
 

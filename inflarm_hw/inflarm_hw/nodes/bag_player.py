@@ -80,7 +80,7 @@ class BagPlayer(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('bag_player', **kwargs)
-        self.params = p = declare_parameters(self, PARAMETERS)
+        self.params = p = declare_parameters(self, PARAMETERS, on_set=self.on_parameters_set)
         if not p['input']:
             raise ValueError("parameter 'input' is required: the bag directory to replay, e.g. "
                              '-p input:=run1')
@@ -98,6 +98,7 @@ class BagPlayer(GuardedCallbacks, Node):
         self.pending: BagMessage | None = None  # its next message
         self.bag_origin_ns = 0  # bag time that plays at wall_origin_ns
         self.wall_origin_ns = 0  # steady clock [ns]
+        self.rate = p['rate']  # the schedule's rate since wall_origin_ns
         self.pass_start_ns = 0
         self.passes = 0
         self.played = 0
@@ -108,25 +109,26 @@ class BagPlayer(GuardedCallbacks, Node):
         if p['clock_rate_hz'] > 0.0:
             self.clock_pub = self.create_publisher(Clock, '/clock', CLOCK_QOS)
             self.create_guarded_timer(1.0 / p['clock_rate_hz'], self.publish_clock)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f'ready: {self.total} messages on {self.topics} from {self.info.path} at rate '
             f"{p['rate']}, starting in {p['start_delay_s']} s")
 
-    def on_parameters_set(self, parameters) -> None:
-        for q in parameters:
-            if q.name == 'rate' and self.pending is not None:
+    def on_parameters_set(self, changed: dict) -> None:
+        if 'rate' in changed:
+            playing = self.pending is not None
+            if playing:
                 # Rebase the schedule where playback is now, so the speed changes from here on.
                 now = time.monotonic_ns()
-                self.bag_origin_ns += round((now - self.wall_origin_ns) * self.params['rate'])
+                self.bag_origin_ns += round((now - self.wall_origin_ns) * self.rate)
                 self.wall_origin_ns = now
-            self.params[q.name] = q.value
-            if q.name == 'rate' and self.pending is not None:
-                self.rearm(self.due_ns(self.pending) - time.monotonic_ns())
-            if q.name == 'loop' and q.value and self.done:
-                self.done = False
-                self.rearm(0)
-            self.get_logger().info(f'{q.name} now {q.value}')
+            self.rate = changed['rate']
+            if playing:
+                self.rearm(self.due_ns(self.pending) - now)
+        if changed.get('loop') and self.done:
+            self.done = False
+            self.rearm(0)
+        for name, value in changed.items():
+            self.get_logger().info(f'{name} now {value}')
 
     def bag_time_ns(self) -> int:
         """The bag time playing now: before the first message its time, after the last the
@@ -136,7 +138,7 @@ class BagPlayer(GuardedCallbacks, Node):
         if self.pending is None:
             return self.info.start_ns + self.info.duration_ns
         now = time.monotonic_ns()
-        return min(self.bag_origin_ns + round((now - self.wall_origin_ns) * self.params['rate']),
+        return min(self.bag_origin_ns + round((now - self.wall_origin_ns) * self.rate),
                    self.pending.timestamp_ns)
 
     def publish_clock(self) -> None:
@@ -144,7 +146,7 @@ class BagPlayer(GuardedCallbacks, Node):
 
     def due_ns(self, message: BagMessage) -> int:
         return self.wall_origin_ns + round(
-            (message.timestamp_ns - self.bag_origin_ns) / self.params['rate'])
+            (message.timestamp_ns - self.bag_origin_ns) / self.rate)
 
     def rearm(self, delay_ns: int) -> None:
         self.timer.timer_period_ns = min(max(delay_ns, MIN_TICK_NS), MAX_TICK_NS)

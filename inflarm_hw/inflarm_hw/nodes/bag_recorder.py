@@ -104,8 +104,6 @@ class BagRecorder(GuardedCallbacks, Node):
         self.pending = list(self.topics)
         self.start_time = time.monotonic()
         self.discovery_timer = self.create_guarded_timer(DISCOVERY_PERIOD_S, self.discover)
-        self.add_post_set_parameters_callback(
-            lambda parameters: self.params.update({q.name: q.value for q in parameters}))
         self.get_logger().info(
             f'ready: recording {self.topics} to {self.bag.path} ({self.bag.storage})')
 

@@ -33,22 +33,19 @@ class DemoJointPublisher(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('demo_joint_publisher', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, on_set=self.on_parameters_set)
         self.joint_state_pub = self.create_publisher(
             JointState, 'joint_states', JOINT_STATE_QOS,
             event_callbacks=publisher_events(self, 'joint_states'))
         self.start_time = time.monotonic()
         self.timer = self.create_guarded_timer(1.0 / self.params['rate_hz'], self.publish)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: {len(self.params['joint_names'])} joints at {self.params['rate_hz']} Hz")
 
-    def on_parameters_set(self, parameters) -> None:
-        for parameter in parameters:
-            self.params[parameter.name] = parameter.value
-            if parameter.name == 'rate_hz':
-                self.timer.timer_period_ns = int(1e9 / parameter.value)
-                self.get_logger().info(f'rate changed to {parameter.value} Hz')
+    def on_parameters_set(self, changed: dict) -> None:
+        if 'rate_hz' in changed:
+            self.timer.timer_period_ns = int(1e9 / changed['rate_hz'])
+            self.get_logger().info(f"rate changed to {changed['rate_hz']} Hz")
 
     def publish(self) -> None:
         t = time.monotonic() - self.start_time

@@ -76,7 +76,7 @@ from inflarm_msgs_json import (
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
 from inflarm_msgs_json.ros.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.qos import (
     COMMAND_QOS,
     JOINT_STATE_QOS,
@@ -203,7 +203,8 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('hw_bridge', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, check=check_bridge_parameters,
+                                         on_set=self.on_parameters_set)
         check_bridge_parameters(self.params)  # bad values fail at start, naming the parameter
         self.lifecycle = 'unconfigured'
         self.driver: McuDriver | None = None
@@ -218,8 +219,6 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
         self.status_pub = self.create_publisher(String, '~/status', LATCHED_QOS)
         self.diagnostics = DiagnosticsPublisher(self, self.diagnostic_status)
         self.create_guarded_service(Trigger, '~/reset_fault', self.on_reset_fault)
-        check_parameter_sets(self, self.params, check_bridge_parameters)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self._autostart = None
         if self.params['autostart']:
             self._autostart = self.create_guarded_timer(self.params['autostart_retry_s'],
@@ -231,14 +230,13 @@ class HwBridge(GuardedCallbacks, LifecycleNode):
 
     # -- parameters -----------------------------------------------------------------------------
 
-    def on_parameters_set(self, parameters) -> None:
-        for q in parameters:
-            self.params[q.name] = q.value
-            if q.name == 'arm.link_pressure_pa' and self.supervisor is not None:
-                self.supervisor.set_link_pressure(q.value)
-                self.get_logger().info(f'link set points now {list(q.value)} Pa')
-            elif q.name not in _RUNTIME:
-                self.get_logger().info(f'{q.name} takes effect at the next configure')
+    def on_parameters_set(self, changed: dict) -> None:
+        for name, value in changed.items():
+            if name == 'arm.link_pressure_pa' and self.supervisor is not None:
+                self.supervisor.set_link_pressure(value)
+                self.get_logger().info(f'link set points now {list(value)} Pa')
+            elif name not in _RUNTIME:
+                self.get_logger().info(f'{name} takes effect at the next configure')
 
     # -- lifecycle ------------------------------------------------------------------------------
 

@@ -77,7 +77,7 @@ from inflarm_hw.sim_mcu import McuPort, SimMcu, SimMcuParams
 from inflarm_hw.sra_plant import SoftArmPlant, SoftArmPlantParams
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.qos import SENSOR_QOS
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -141,7 +141,8 @@ class SimMcuNode(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('sim_mcu', **kwargs)
-        self.params = p = declare_parameters(self, PARAMETERS)
+        self.params = p = declare_parameters(self, PARAMETERS, check=check_parameters,
+                                             on_set=self.on_parameters_set)
         check_parameters(p)
         seed = p['seed']
         rng = np.random.default_rng(None if seed < 0 else seed)
@@ -177,20 +178,17 @@ class SimMcuNode(GuardedCallbacks, Node):
         self.create_guarded_timer(1.0 / p['io_rate_hz'], self.poll)
         self.create_guarded_timer(self.dt, self.step)
         self.create_guarded_timer(1.0 / p['truth_rate_hz'], self.publish_truth)
-        check_parameter_sets(self, self.params, check_parameters)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: simulated MCU ({p['plant']}) on {self.port.path}"
             + (f' (link {p["link"]})' if p['link'] else '') + f", {p['rate_hz']} Hz")
 
-    def on_parameters_set(self, parameters) -> None:
-        for q in parameters:
-            self.params[q.name] = q.value
+    def on_parameters_set(self, changed: dict) -> None:
+        for name, value in changed.items():
             change = (None if self.mcu.arm is None
-                      else apply_arm_plant_parameter(self.mcu.arm, q.name, q.value))
+                      else apply_arm_plant_parameter(self.mcu.arm, name, value))
             if change is not None:
                 self.get_logger().info(change)
-        if any(q.name == 'fault.kind' for q in parameters) and self.params['fault.kind']:
+        if 'fault.kind' in changed and self.params['fault.kind']:
             p = self.params
             try:
                 self.mcu.inject(FAULT_KINDS[p['fault.kind']], p['fault.channel'],

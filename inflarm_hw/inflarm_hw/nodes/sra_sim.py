@@ -94,7 +94,7 @@ class SraSim(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('sra_sim', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, on_set=self.on_parameters_set)
         seed = self.params['seed']
         self.plant = SoftArmPlant(
             n=1, params=sra_plant_from_parameters(self.params),
@@ -124,19 +124,16 @@ class SraSim(GuardedCallbacks, Node):
         if self.params['camera.enabled']:
             self.camera = CameraPublisher(self, self.params, lambda: self.plant.end_point[0],
                                           None if seed < 0 else seed)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: SRA at rest, {self.params['physics_rate_hz']} Hz physics, chambers "
             f"{', '.join(CHAMBERS)}")
 
-    def on_parameters_set(self, parameters) -> None:
-        for parameter in parameters:
-            self.params[parameter.name] = parameter.value
-            if parameter.name.startswith('measurement_noise.'):
+    def on_parameters_set(self, changed: dict) -> None:
+        for name, value in changed.items():
+            if name.startswith('measurement_noise.'):
                 field = {'measurement_noise.center_px': 'noise_center_px',
-                         'measurement_noise.radius_px': 'noise_radius_px'}[parameter.name]
-                self.plant.params = dataclasses.replace(self.plant.params,
-                                                        **{field: parameter.value})
+                         'measurement_noise.radius_px': 'noise_radius_px'}[name]
+                self.plant.params = dataclasses.replace(self.plant.params, **{field: value})
 
     def on_command(self, msg: String) -> None:
         command = check_chamber_pressures(

@@ -18,7 +18,7 @@ from inflarm_model.nodes.arm_parameters import (
     urdf_from_parameters,
 )
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import declare_parameters
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -27,21 +27,19 @@ class RobotDescription(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('robot_description', **kwargs)
-        self.params = declare_parameters(self, ARM_PARAMETERS)
+        self.params = declare_parameters(self, ARM_PARAMETERS, check=check_arm_parameters,
+                                         on_set=self.on_parameters_set)
         problem = check_arm_parameters(self.params)
         if problem is not None:
             raise ValueError(problem)
         self.description_pub = self.create_publisher(
             String, 'robot_description', LATCHED_QOS,
             event_callbacks=publisher_events(self, 'robot_description'))
-        check_parameter_sets(self, self.params, check_arm_parameters)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.publish()
         self.get_logger().info('ready: robot_description published')
 
-    def on_parameters_set(self, parameters) -> None:
-        self.params.update({p.name: p.value for p in parameters})
-        if any(p.name == 'arm.spring_stiffness' for p in parameters):
+    def on_parameters_set(self, changed: dict) -> None:
+        if 'arm.spring_stiffness' in changed:
             self.publish()
             self.get_logger().info('stiffness changed: robot_description republished')
 

@@ -10,8 +10,11 @@ Usage in a node constructor::
     self.params = declare_parameters(self, PARAMETERS)   # {'rate_hz': 50.0, ...}
 
 rclpy then rejects runtime sets of the wrong type, out of range or read-only
-(``SetParametersResult(successful=False)``); a node validates relations between parameters with
-`check_parameter_sets` and applies accepted values in a post-set callback.
+(``SetParametersResult(successful=False)``). The returned dict follows accepted runtime sets; a
+node that checks relations between parameters, or derives state from them, says so once::
+
+    self.params = declare_parameters(self, PARAMETERS, check=check_rates,
+                                     on_set=self.on_parameters_set)
 """
 
 from collections.abc import Callable
@@ -56,26 +59,23 @@ class Parameter:
         return descriptor
 
 
-def declare_parameters(node: Node, parameters: tuple[Parameter, ...]) -> dict[str, Any]:
-    """Declare ``parameters`` on ``node`` and return their values (overrides applied)."""
-    return {
-        p.name: node.declare_parameter(p.name, p.default, p.descriptor()).value
-        for p in parameters
-    }
+def declare_parameters(node: Node, parameters: tuple[Parameter, ...],
+                       check: Callable[[dict[str, Any]], Any] | None = None,
+                       on_set: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+    """Declare ``parameters`` on ``node``; return their values (overrides applied), kept current.
 
-
-def check_parameter_sets(node: Node, values: dict[str, Any],
-                         check: Callable[[dict[str, Any]], Any]) -> None:
-    """Reject a runtime set of ``node``'s parameters that ``check`` finds fault with.
-
-    ``check`` gets the node's current ``values`` (the dict `declare_parameters` returned, kept
-    current by the node's post-set callback) with the proposed ones applied, so it can check
-    relations between parameters. It returns why they are wrong (a str) or raises ValueError
+    After every accepted runtime set the returned dict holds the new values, then
+    ``on_set(changed)`` gets the ones that changed (name -> value), for what the node derives
+    from them. ``check`` gets the current values with the proposed ones applied, so it can check
+    relations between parameters: it returns why they are wrong (a str) or raises ValueError
     naming what is wrong; any other result (None, or the configuration it built from them)
     accepts them. A rejected set changes nothing, and its reason is the set's answer.
     """
-    def on_set(parameters) -> SetParametersResult:
-        proposed = {**values, **{q.name: q.value for q in parameters}}
+    values = {p.name: node.declare_parameter(p.name, p.default, p.descriptor()).value
+              for p in parameters}
+
+    def validate(proposed_parameters) -> SetParametersResult:
+        proposed = {**values, **{q.name: q.value for q in proposed_parameters}}
         try:
             result = check(proposed)
         except ValueError as err:
@@ -83,4 +83,13 @@ def check_parameter_sets(node: Node, values: dict[str, Any],
         problem = result if isinstance(result, str) else None
         return SetParametersResult(successful=problem is None, reason=problem or '')
 
-    node.add_on_set_parameters_callback(on_set)
+    def apply(accepted_parameters) -> None:
+        changed = {q.name: q.value for q in accepted_parameters if q.name in values}
+        values.update(changed)
+        if changed and on_set is not None:
+            on_set(changed)
+
+    if check is not None:
+        node.add_on_set_parameters_callback(validate)
+    node.add_post_set_parameters_callback(apply)
+    return values

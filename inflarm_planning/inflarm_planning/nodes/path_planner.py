@@ -58,7 +58,7 @@ from visualization_msgs.msg import MarkerArray
 from inflarm_msgs_json import ObstacleSet, PlanOutcome, PlanRequest
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import LATCHED_QOS, RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
@@ -152,7 +152,7 @@ class PathPlanner(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('path_planner', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, check=check_planner_parameters)
         check_planner_parameters(self.params)
         self.frame_id = self.params['frame_id']
         self.model = ObstacleModel((), self.params['min_alert_margin_m'], 0.0)
@@ -180,18 +180,11 @@ class PathPlanner(GuardedCallbacks, Node):
         self.create_guarded_subscription(PointStamped, 'ball_position', self.on_ball_position,
                                          SENSOR_QOS)
         self.create_guarded_service(GetPlan, '~/plan', self.on_plan_service)
-        check_parameter_sets(self, self.params, check_planner_parameters)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: frame '{self.frame_id}', alert margin >= "
             f"{self.params['min_alert_margin_m']:.3f} m, cost '{self.params['cost']}', "
             f"{self.params['connectivity']}-connected, service "
             f"grids up to {self.params['service.max_cells']:.3g} points")
-
-    # -- parameters ------------------------------------------------------------------------------
-
-    def on_parameters_set(self, parameters) -> None:
-        self.params.update({parameter.name: parameter.value for parameter in parameters})
 
     # -- inputs ----------------------------------------------------------------------------------
 

@@ -53,7 +53,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from inflarm_model.camera import PinholeCamera
 from inflarm_msgs_json.ros.image import compressed_to_bgr, image_to_bgr, numpy_to_image
 from inflarm_msgs_json.ros.node import GuardedCallbacks
-from inflarm_msgs_json.ros.parameters import Parameter, check_parameter_sets, declare_parameters
+from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
@@ -124,7 +124,8 @@ class BallTrackerNode(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('ball_tracker', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, check=settings_from_parameters,
+                                         on_set=self.on_parameters_set)
         if self.params['transport'] not in TRANSPORTS:
             raise ValueError(f"transport must be one of {list(TRANSPORTS)}, got "
                              f"'{self.params['transport']}'")
@@ -142,16 +143,13 @@ class BallTrackerNode(GuardedCallbacks, Node):
         self.create_guarded_subscription(image_type, self.image_topic, self.on_image,
                                          SENSOR_QOS)
         self.create_guarded_timer(self.params['diagnostics_period_s'], self.publish_diagnostics)
-        check_parameter_sets(self, self.params, settings_from_parameters)
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self.get_logger().info(
             f"ready: tracking a {self.params['ball_diameter_m'] * 1000:.0f} mm yellow ball on "
             f"{self.image_topic}, publishing ball_position in {self.params['frame_id']}")
 
     # -- parameters ----------------------------------------------------------------------------
 
-    def on_parameters_set(self, parameters) -> None:
-        self.params.update({p.name: p.value for p in parameters})
+    def on_parameters_set(self, changed: dict) -> None:
         self.pipeline = BallPipeline(settings_from_parameters(self.params))
 
     # -- inputs --------------------------------------------------------------------------------

@@ -202,7 +202,6 @@ class CameraDriverNode(GuardedCallbacks, Node):
         self.counters = _Counters()
         self.diagnostics = DiagnosticsPublisher(self, self.diagnostic_status,
                                                 self.params['diagnostics_period_s'])
-        self.add_post_set_parameters_callback(self.on_parameters_set)
         self._stop = threading.Event()
         self.capture_thread = threading.Thread(target=self._capture, name='camera_capture',
                                                daemon=True)
@@ -216,9 +215,6 @@ class CameraDriverNode(GuardedCallbacks, Node):
             f"ready: capturing from {self.params['device']}, publishing {self.image_topic} in "
             f"{self.params['frame_id']}; {calibration}")
         self.capture_thread.start()
-
-    def on_parameters_set(self, parameters) -> None:
-        self.params.update({p.name: p.value for p in parameters})
 
     def destroy_node(self) -> None:
         """Stop the capture thread (it finishes the frame in hand), then destroy the node."""
