@@ -1,8 +1,9 @@
 """A* path planning of the soft arm's end around cuboid obstacles (section 4.1 of 001_...).
 
-``plan_path(start, goal, obstacles, resolution, alert_margin)`` searches the grid of the work
-space (`inflarm_planning.free_space`) with A* (open set, closed set, Fig 9) and returns the grid
-path, from the exact start to the exact goal, in ``sra_mount`` [m].
+``plan(start, goal, obstacles, resolution, alert_margin)`` searches the grid of the work space
+(`inflarm_planning.free_space`) with A* (open set, closed set, Fig 9) and returns the grid path,
+from the exact start to the exact goal, in ``sra_mount`` [m], with how it was found;
+``plan_path`` the path alone.
 
 Neighbours (``connectivity=``): the paper's "eight neighbouring points" are those of a planar
 grid, the 3 x 3 square around a point; in 3-D the same square is the 3 x 3 x 3 cube, 26
@@ -250,20 +251,47 @@ def plan(
     workspace: Workspace = WORKSPACE_POSITIVE,
     max_cells: int = MAX_CELLS,
 ) -> PlanResult:
-    """Plan a collision-free grid path of the end and report how it was found.
+    """Plan a collision-free path of the soft arm's end by A* on the grid (section 4.1) and
+    report how it was found.
 
-    Same parameters as `plan_path`.
+    Parameters
+    ----------
+    start, goal : array-like, shape (3,)
+        End points in ``sra_mount`` [m]; different.
+    obstacles : iterable of Cuboid or inflarm_msgs_json.Cuboid
+        Axis-aligned obstacles in ``sra_mount``.
+    resolution : float
+        Grid spacing [m], > 0; at most every alert region's width.
+    alert_margin : float
+        Growth of each obstacle per axis [m], >= 0 (the paper: more than half the actuator
+        width). The end stays out of the grown boxes and the PEA axes do not cross them.
+    cost : {'length', 'paper'}
+        Path length (default), or eq. (7) (see the module docstring).
+    connectivity : {6, 18, 26}
+        Neighbours of a grid point: across the faces (6), faces and edges (18), or the whole
+        3 x 3 x 3 cube (26, the default: the paper's eight neighbours of a planar grid in 3-D,
+        and the shortest paths).
+    workspace : Workspace
+        Bounds of the grid (default: the positive-pressure work space, section 2.2).
+    max_cells : int
+        Largest grid accepted (memory).
 
     Returns
     -------
     PlanResult
+        Its ``path``, shape (N, 3), goes from ``start`` through grid points to ``goal`` [m],
+        ``sra_mount``. The free grid is built once per obstacle set and resolution and cached
+        (`free_space`).
 
     Raises
     ------
     ValueError
-        For bad arguments (see `plan_path`).
+        Non-finite or misshapen start or goal, start == goal, an unknown cost, a
+        connectivity other than 6, 18 or 26, a bad obstacle, a negative margin, a
+        resolution <= 0, too fine for ``max_cells`` or coarser than an alert region.
     NoPathError
-        When no path exists (see `plan_path`).
+        Start or goal outside the work space, inside an alert region, with an axis across
+        one, or with no free grid point in reach; or no connection (the open set emptied).
     """
     start = _endpoint(start, 'start')
     goal = _endpoint(goal, 'goal')
@@ -306,57 +334,6 @@ def plan(
                       time.perf_counter() - started, space)
 
 
-def plan_path(
-    start: npt.ArrayLike,
-    goal: npt.ArrayLike,
-    obstacles: Iterable = (),
-    resolution: float = 0.005,
-    alert_margin: float = 0.01,
-    *,
-    cost: str = 'length',
-    connectivity: int = 26,
-    workspace: Workspace = WORKSPACE_POSITIVE,
-    max_cells: int = MAX_CELLS,
-) -> npt.NDArray[np.float64]:
-    """Plan a collision-free path of the soft arm's end by A* on the grid (section 4.1).
-
-    Parameters
-    ----------
-    start, goal : array-like, shape (3,)
-        End points in ``sra_mount`` [m]; different.
-    obstacles : iterable of Cuboid or inflarm_msgs_json.Cuboid
-        Axis-aligned obstacles in ``sra_mount``.
-    resolution : float
-        Grid spacing [m], > 0; at most every alert region's width.
-    alert_margin : float
-        Growth of each obstacle per axis [m], >= 0 (the paper: more than half the actuator
-        width). The end stays out of the grown boxes and the PEA axes do not cross them.
-    cost : {'length', 'paper'}
-        Path length (default), or eq. (7) (see the module docstring).
-    connectivity : {6, 18, 26}
-        Neighbours of a grid point: across the faces (6), faces and edges (18), or the whole
-        3 x 3 x 3 cube (26, the default: the paper's eight neighbours of a planar grid in 3-D,
-        and the shortest paths).
-    workspace : Workspace
-        Bounds of the grid (default: the positive-pressure work space, section 2.2).
-    max_cells : int
-        Largest grid accepted (memory).
-
-    Returns
-    -------
-    path : ndarray, shape (N, 3)
-        From ``start`` through grid points to ``goal`` [m], ``sra_mount``. The free grid is
-        built once per obstacle set and resolution and cached (`free_space`).
-
-    Raises
-    ------
-    ValueError
-        Non-finite or misshapen start or goal, start == goal, an unknown cost, a
-        connectivity other than 6, 18 or 26, a bad obstacle, a negative margin, a
-        resolution <= 0, too fine for ``max_cells`` or coarser than an alert region.
-    NoPathError
-        Start or goal outside the work space, inside an alert region, with an axis across
-        one, or with no free grid point in reach; or no connection (the open set emptied).
-    """
-    return plan(start, goal, obstacles, resolution, alert_margin, cost=cost,
-                connectivity=connectivity, workspace=workspace, max_cells=max_cells).path
+def plan_path(*args, **kwargs) -> npt.NDArray[np.float64]:
+    """The path of `plan` (same arguments), shape (N, 3) [m], ``sra_mount``."""
+    return plan(*args, **kwargs).path

@@ -26,10 +26,8 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from inflarm_model.soft_arm import WORKSPACE_POSITIVE, Workspace
 from inflarm_planning.astar import PlanResult, plan
 from inflarm_planning.collision import CHECK_STEP, box_array, check_margin, motions_collide
-from inflarm_planning.free_space import MAX_CELLS
 
 SHORTCUT_BATCH = 32
 """Candidate shortcuts tested per vectorized call, farthest first."""
@@ -356,23 +354,16 @@ def make_trajectory(
 
 
 def plan_trajectory(
-    start: npt.ArrayLike,
-    goal: npt.ArrayLike,
-    obstacles: Iterable = (),
-    resolution: float = 0.005,
-    alert_margin: float = 0.01,
-    *,
-    cost: str = 'length',
-    connectivity: int = 26,
-    workspace: Workspace = WORKSPACE_POSITIVE,
-    max_cells: int = MAX_CELLS,
+    *plan_args,
     max_step: float = 0.005,
     max_speed: float = 0.005,
     max_accel: float = 0.005,
     smoothing: int = 3,
     check_step: float = CHECK_STEP,
+    **plan_kwargs,
 ) -> TrajectoryPlan:
-    """A* (`inflarm_planning.astar.plan`) then `make_trajectory`; same parameters as both.
+    """A* (`inflarm_planning.astar.plan`, with ``plan_args`` and ``plan_kwargs``) then
+    `make_trajectory` (with the keyword arguments here).
 
     Raises
     ------
@@ -386,8 +377,7 @@ def plan_trajectory(
                         ('max_accel', max_accel), ('check_step', check_step)):
         _positive(value, name)
     smooth(np.zeros((2, 3)), np.zeros((0, 2, 3)), smoothing)  # validates smoothing
-    grid = plan(start, goal, obstacles, resolution, alert_margin, cost=cost,
-                connectivity=connectivity, workspace=workspace, max_cells=max_cells)
+    grid = plan(*plan_args, **plan_kwargs)
     space = grid.free_space
     trajectory = make_trajectory(grid.path, space.obstacles, space.alert_margin,
                                  max_step=max_step, max_speed=max_speed, max_accel=max_accel,
