@@ -198,8 +198,13 @@ class Timing:
 
 
 def _calibrate(timer: timeit.Timer, min_time_s: float) -> int:
-    """Calls per batch for a batch of about ``min_time_s``: batches of 1, 10, 100, ... calls
-    until one lasts a tenth of it (which warms the candidate up), scaled."""
+    """Calls per batch for a batch of about ``min_time_s``: after one warm-up call, batches of
+    1, 10, 100, ... calls until one lasts a tenth of it, scaled.
+
+    The warm-up call takes what only a first call costs (a compiled function loaded from its
+    cache: ~0.1 s), which would otherwise set one call per batch, timed cold.
+    """
+    timer.timeit(1)
     n = 1
     while True:
         t = timer.timeit(n)

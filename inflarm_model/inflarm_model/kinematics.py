@@ -9,16 +9,16 @@ Conventions: poses are 4x4 homogeneous transforms of the tip (DH frame n) in the
 (DH frame 0); Jacobians are geometric, linear rows first, in base-frame axes,
 J_i = [z_{i-1} x (p_e - p_{i-1}); z_{i-1}] (eq. 4); columns follow the DH joint order.
 
-Three independent implementations are kept, each checking the others in the tests:
-
-- single configurations go through Pinocchio, built from the URDF of ``inflarm_model.urdf``;
-- batches go through ``dh_chain_kinematics``, the DH recursion on the frame axes compiled with
-  numba (also the kinematics inside the compiled elastostatic solvers of
-  ``inflarm_model.elastostatics``);
-- ``dh_fk_reference`` / ``dh_jacobian_reference`` are the textbook per-joint 4x4 chain.
+One implementation evaluates the arm: ``dh_chain_kinematics``, the DH recursion on the frame
+axes compiled with numba, for a single configuration and for every row of a batch alike (and
+inside the compiled elastostatic solvers of ``inflarm_model.elastostatics``). Two independent
+ones check it in the tests: Pinocchio on the URDF the robot publishes (``DHChain.model``, built
+by ``inflarm_model.urdf``), and ``dh_fk_reference`` / ``dh_jacobian_reference``, the textbook
+per-joint 4x4 chain.
 """
 
 from collections.abc import Sequence
+from functools import cached_property
 import math
 
 from numba import njit
@@ -37,6 +37,7 @@ from inflarm_model.urdf import (
     SPRING_JOINT_NAMES,
     TIP_LINK,
     check_dh_table,
+    check_joint_names,
     dh_chain_urdf,
     flexible_dh_table,
     rigid_dh_table,
@@ -59,9 +60,6 @@ _isfinite = math.isfinite
 _hypot = math.hypot
 # Index arrays of MOTOR_INDICES and SPRING_INDICES (an array indexes 8x faster than a list).
 _MOTOR_INDEX, _SPRING_INDEX = np.array(MOTOR_INDICES), np.array(SPRING_INDICES)
-_frame_jacobian = pin.computeFrameJacobian
-_frames_forward_kinematics = pin.framesForwardKinematics
-_LOCAL_WORLD_ALIGNED = pin.LOCAL_WORLD_ALIGNED
 
 
 def all_finite(v: npt.NDArray[np.float64]) -> bool:
@@ -303,9 +301,9 @@ def _dh_chain_rows(dh_table, Q, poses, jacobians):
 class DHChain:
     """Serial revolute arm given by a standard DH table.
 
-    Single configurations are evaluated with Pinocchio on a model built from the chain's URDF
-    (``inflarm_model.urdf.dh_chain_urdf``); batches with the compiled recursion
-    ``dh_chain_kinematics``.
+    Every configuration, single or in a batch, is evaluated by the compiled recursion
+    ``dh_chain_kinematics``; ``model`` is the same chain in Pinocchio, built from its URDF
+    (``inflarm_model.urdf.dh_chain_urdf``).
 
     Parameters
     ----------
@@ -319,11 +317,6 @@ class DHChain:
     ------
     ValueError
         On a malformed table or joint names.
-
-    Notes
-    -----
-    An instance owns one ``pinocchio.Data`` workspace: share an instance between threads only
-    behind a lock, or build one per thread.
     """
 
     def __init__(self, dh_table: npt.ArrayLike, joint_names: Sequence[str]) -> None:
@@ -332,22 +325,8 @@ class DHChain:
         self._dh_table = table
         self._n = n = table.shape[0]
         self._shape = (n,)
-        self.joint_names: tuple[str, ...] = tuple(joint_names)
-        self._model = pin.buildModelFromXML(
-            dh_chain_urdf('inflarm_dh_chain', table, self.joint_names)
-        )
-        # Pinocchio numbers joints depth-first, which for a serial chain is the DH order; the
-        # fast paths rely on it, so prove it once here rather than permute on every call.
-        idx_q = [
-            self._model.joints[self._model.getJointId(name)].idx_q for name in self.joint_names
-        ]
-        if self._model.nq != n or self._model.nv != n or idx_q != list(range(n)):
-            raise RuntimeError(f'Pinocchio joint order {idx_q} differs from the DH order')
-        self._data = self._model.createData()
-        self._tip_id = self._model.getFrameId(TIP_LINK, pin.BODY)
-        # A live reference into data.oMf, refreshed by every kinematic pass: indexing oMf on
-        # every call would cost about 1 us.
-        self._tip = self._data.oMf[self._tip_id]
+        self.joint_names: tuple[str, ...] = check_joint_names(joint_names, n)
+
     @property
     def n_joints(self) -> int:
         """Number of joints n."""
@@ -358,15 +337,31 @@ class DHChain:
         """Read-only DH table, shape (n, 3), rows ``(a_i [m], alpha_i [rad], d_i [m])``."""
         return self._dh_table
 
-    @property
+    @cached_property
     def model(self) -> pin.Model:
-        """Pinocchio model of the chain; configuration and velocity in DH joint order."""
-        return self._model
+        """Pinocchio model of the chain, from its URDF; configuration and velocity in DH joint
+        order (checked when it is built)."""
+        model = pin.buildModelFromXML(
+            dh_chain_urdf('inflarm_dh_chain', self._dh_table, self.joint_names))
+        # Pinocchio numbers joints depth-first, which for a serial chain is the DH order.
+        idx_q = [model.joints[model.getJointId(name)].idx_q for name in self.joint_names]
+        if model.nq != self._n or model.nv != self._n or idx_q != list(range(self._n)):
+            raise RuntimeError(f'Pinocchio joint order {idx_q} differs from the DH order')
+        return model
 
     @property
     def tip_frame_id(self) -> int:
         """Index of the ``tip`` frame (DH frame n) in ``model.frames``."""
-        return self._tip_id
+        return self.model.getFrameId(TIP_LINK, pin.BODY)
+
+    def _pass(self, q: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], ...]:
+        """Tip pose (4, 4), Jacobian (6, n) and frame origins (n + 1, 3) of one configuration."""
+        q = _joint_vector(q, self._shape)
+        pose = np.empty((4, 4))
+        jacobian = np.empty((6, self._n))
+        origins = np.empty((self._n + 1, 3))
+        dh_chain_kinematics(self._dh_table, q, pose, jacobian, origins)
+        return pose, jacobian, origins
 
     def fk(self, q: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Tip pose in the base frame.
@@ -386,9 +381,7 @@ class DHChain:
         ValueError
             If ``q`` has the wrong shape or is not finite.
         """
-        q = _joint_vector(q, self._shape)
-        _frames_forward_kinematics(self._model, self._data, q)
-        return self._tip.homogeneous
+        return self._pass(q)[0]
 
     def jacobian(self, q: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Geometric Jacobian of eq. (4) at the tip, in the base frame.
@@ -409,8 +402,7 @@ class DHChain:
         ValueError
             If ``q`` has the wrong shape or is not finite.
         """
-        q = _joint_vector(q, self._shape)
-        return _frame_jacobian(self._model, self._data, q, self._tip_id, _LOCAL_WORLD_ALIGNED)
+        return self._pass(q)[1]
 
     def fk_and_jacobian(
         self, q: npt.ArrayLike
@@ -436,10 +428,8 @@ class DHChain:
         ValueError
             If ``q`` has the wrong shape or is not finite.
         """
-        q = _joint_vector(q, self._shape)
-        # computeFrameJacobian runs the forward pass and refreshes data.oMf[tip] too.
-        J = _frame_jacobian(self._model, self._data, q, self._tip_id, _LOCAL_WORLD_ALIGNED)
-        return self._tip.homogeneous, J
+        pose, jacobian, _ = self._pass(q)
+        return pose, jacobian
 
     def _batch_pass(
         self, Q: npt.ArrayLike
@@ -534,11 +524,7 @@ class DHChain:
         ValueError
             If ``q`` has the wrong shape or is not finite.
         """
-        q = _vector('q', q, self._n)
-        origins = np.empty((self._n + 1, 3))
-        dh_chain_kinematics(self._dh_table, q, np.empty((4, 4)), np.empty((6, self._n)),
-                            origins)
-        return origins
+        return self._pass(q)[2]
 
 
 class RigidArm(DHChain):

@@ -237,7 +237,8 @@ def check_dh_table(dh_table: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return table
 
 
-def _check_joint_names(joint_names: Sequence[str], n: int) -> tuple[str, ...]:
+def check_joint_names(joint_names: Sequence[str], n: int) -> tuple[str, ...]:
+    """Return ``joint_names`` as a tuple of n unique URDF joint names, or raise ValueError."""
     names = tuple(joint_names)
     if len(names) != n:
         raise ValueError(f'expected joint_names of length {n}, got {len(names)}')
@@ -390,7 +391,7 @@ def dh_chain_urdf(
         or caps for an unknown joint.
     """
     table = check_dh_table(dh_table)
-    names = _check_joint_names(joint_names, table.shape[0])
+    names = check_joint_names(joint_names, table.shape[0])
     radius = _length('radius', radius)
     thickness = _length('thickness', thickness)
     springs = {}
