@@ -11,6 +11,7 @@ import re
 import subprocess
 import sys
 import textwrap
+import time
 
 import pytest
 
@@ -149,3 +150,16 @@ def test_interleaved_times_every_candidate_in_its_order():
                timing.values())
     with pytest.raises(ValueError, match='rounds: must be >= 1'):
         interleaved({'a': lambda: None}, rounds=0)
+
+
+def test_a_slow_first_call_does_not_set_the_batch_size():
+    # like a compiled function loaded from its cache on its first call
+    calls = []
+
+    def candidate():
+        if not calls:
+            time.sleep(0.05)
+        calls.append(None)
+
+    timing = interleaved({'first call slow': candidate}, rounds=1, min_time_s=0.01)
+    assert timing['first call slow'].number > 10  # 1 when the slow call calibrated it
