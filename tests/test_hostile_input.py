@@ -290,16 +290,17 @@ NODES = {
                                lambda n, out: n.tip is not None and n.tip[0] == 0.8)}),
     'pressure_controller': NodeCase(PressureController, valid={
         'ball_position': (lambda n: point(0.0, 0.0, 0.604, 'sra_mount'),
-                          lambda n, out: n.position is not None and n.position[2] == 0.604),
+                          lambda n, out: n.session.position is not None
+                          and n.session.position[2] == 0.604),
         'control_task': (
             lambda n: to_string_msg(ControlTask('sra_mount', (0.1, 0.11, 0.67), 'pid', 3)),
-            lambda n, out: n.trial_active and n.task.trial_id == 3),
+            lambda n, out: n.session.trial_active and n.session.task.trial_id == 3),
         'planned_path': (lambda n: path([(0.0, 0.0, 0.61), (0.05, 0.0, 0.62)], 'sra_mount', n),
-                         lambda n, out: n.follower.active
-                         and n.follower.goal.tolist() == [0.05, 0.0, 0.62]),
+                         lambda n, out: n.session.follower.active
+                         and n.session.follower.goal.tolist() == [0.05, 0.0, 0.62]),
         'obstacles': (
             lambda n: to_string_msg(ObstacleSet('sra_mount', 0.03, (OBSTACLE.to_message(),))),
-            lambda n, out: len(n.follower.alert_regions) == 1)}),
+            lambda n, out: len(n.session.follower.alert_regions) == 1)}),
     'trial_runner': NodeCase(TrialRunner, valid={
         'trial_report': (lambda n: _report(n), lambda n, out: n.trial == 1)}),
     'hw_bridge': NodeCase(HwBridge, prepare=start_sim_mcu, start=configure_and_activate, valid={

@@ -77,28 +77,28 @@ def test_tasks_are_rejected_without_a_position_or_outside_the_workspace(executor
     rig = Rig(executor)
     rig.task(TARGET)  # no ball position yet
     rig.spin(0.5)
-    assert not rig.controller.trial_active and rig.commands == []
+    assert not rig.controller.session.trial_active and rig.commands == []
 
     rig.ball(START)
-    assert spin_until(executor, lambda: rig.controller.position is not None)
+    assert spin_until(executor, lambda: rig.controller.session.position is not None)
     rig.task((0.1, 0.1, 1.2))  # above the workspace
     rig.spin(0.5)
-    assert not rig.controller.trial_active and rig.commands == []
+    assert not rig.controller.session.trial_active and rig.commands == []
 
     rig.ball((np.nan, 0.0, 0.6))  # ignored: the last good position stays
     rig.ball((0.0, 0.0, 0.7), frame_id='camera')  # ignored: wrong frame
     rig.spin(0.3)
-    np.testing.assert_array_equal(rig.controller.position, START)
+    np.testing.assert_array_equal(rig.controller.session.position, START)
 
     rig.task(TARGET)  # the node kept running and accepts a valid task
     assert spin_until(executor, lambda: len(rig.commands) >= 2)
-    assert rig.controller.trial_active
+    assert rig.controller.session.trial_active
 
 
 def test_a_vision_dropout_holds_the_pressures_and_records_no_learning(executor):
     rig = Rig(executor, measurement_timeout_s=0.3)
     rig.ball(START)
-    assert spin_until(executor, lambda: rig.controller.position is not None)
+    assert spin_until(executor, lambda: rig.controller.session.position is not None)
     rig.task(TARGET)
     # With the ball far from the target, PID raises the pressures step by step...
     for _ in range(6):
@@ -118,7 +118,7 @@ def test_a_finished_trial_reports_learns_and_seeds_the_next(executor, tmp_path):
     memory_file = tmp_path / 'ilc.npz'
     rig = Rig(executor, trial_duration_s=1.0, ilc_memory_path=str(memory_file))
     rig.ball(START)
-    assert spin_until(executor, lambda: rig.controller.position is not None)
+    assert spin_until(executor, lambda: rig.controller.session.position is not None)
     rig.task(TARGET, mode='pid_ilc', trial_id=0)
 
     def keep_seeing_start():
@@ -135,11 +135,11 @@ def test_a_finished_trial_reports_learns_and_seeds_the_next(executor, tmp_path):
     response = rig.call('start_trial')
     assert response.success and 'trial 1' in response.message
     # Trial 1 starts from trial 0's recorded outputs, not from zero.
-    assert rig.controller.controller._ff[0, 0].max() > 0.0
+    assert rig.controller.session.controller._ff[0, 0].max() > 0.0
 
     assert rig.call('reset_learning').message == 'forgot 1 ILC memories'
     assert rig.call('stop').success
-    assert not rig.controller.trial_active
+    assert not rig.controller.session.trial_active
 
 
 def test_a_corrupt_memory_file_stops_the_node_at_startup(ros_context, tmp_path):
@@ -153,11 +153,11 @@ def test_a_corrupt_memory_file_stops_the_node_at_startup(ros_context, tmp_path):
 def test_vent_ends_the_trial_and_holds_zero_pressure(executor):
     rig = Rig(executor)
     rig.ball(START)
-    assert spin_until(executor, lambda: rig.controller.position is not None)
+    assert spin_until(executor, lambda: rig.controller.session.position is not None)
     rig.task(TARGET)
     assert spin_until(executor, lambda: len(rig.commands) >= 3)
     assert rig.call('vent').success
-    assert not rig.controller.trial_active
+    assert not rig.controller.session.trial_active
     count = len(rig.commands)
     rig.spin(0.7)
     assert len(rig.commands) >= count + 2
@@ -174,7 +174,7 @@ def test_a_planned_path_is_followed_at_the_arms_pace_with_preloaded_bellows(exec
     path_pub = rig.probe.create_publisher(Path, 'planned_path', LATCHED_QOS)
     waypoints = [(0.02, 0.02, 0.62), (0.05, 0.05, 0.64), TARGET]
     rig.ball(waypoints[0])
-    assert spin_until(executor, lambda: rig.controller.position is not None)
+    assert spin_until(executor, lambda: rig.controller.session.position is not None)
     path = Path()
     path.header.frame_id = 'sra_mount'
     for point in waypoints:
@@ -182,8 +182,8 @@ def test_a_planned_path_is_followed_at_the_arms_pace_with_preloaded_bellows(exec
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = point
         path.poses.append(pose)
     path_pub.publish(path)
-    assert spin_until(executor, lambda: rig.controller.following)
-    follower = rig.controller.follower
+    assert spin_until(executor, lambda: rig.controller.session.following)
+    follower = rig.controller.session.follower
     np.testing.assert_allclose(follower.goal, TARGET)
     rig.ball((0.02, 0.02, 0.66))  # 40 mm off the reference: it waits
     rig.spin(0.6)
@@ -197,8 +197,8 @@ def test_a_planned_path_is_followed_at_the_arms_pace_with_preloaded_bellows(exec
         min(c.as_dict()[b] for b in ('B1', 'B2', 'B3', 'B4')) >= 6000.0
         for c in rig.commands)
     rig.task(TARGET)  # a task ends the path
-    assert spin_until(executor, lambda: rig.controller.trial_active)
-    assert not rig.controller.following
+    assert spin_until(executor, lambda: rig.controller.session.trial_active)
+    assert not rig.controller.session.following
 
 
 def test_a_path_outside_the_workspace_is_rejected(executor):
@@ -210,7 +210,7 @@ def test_a_path_outside_the_workspace_is_rejected(executor):
     rig = Rig(executor)
     path_pub = rig.probe.create_publisher(Path, 'planned_path', LATCHED_QOS)
     rig.ball(START)
-    assert spin_until(executor, lambda: rig.controller.position is not None)
+    assert spin_until(executor, lambda: rig.controller.session.position is not None)
     path = Path()
     path.header.frame_id = 'sra_mount'
     for point in ((0.0, 0.0, 0.62), (0.0, 0.0, 1.5)):
@@ -219,14 +219,14 @@ def test_a_path_outside_the_workspace_is_rejected(executor):
         path.poses.append(pose)
     path_pub.publish(path)
     rig.spin(0.5)
-    assert not rig.controller.trial_active and rig.commands == []
+    assert not rig.controller.session.trial_active and rig.commands == []
 
 
 def test_an_absurd_ball_position_reaches_neither_the_report_nor_the_memory(executor, tmp_path):
     memory_file = tmp_path / 'ilc.npz'
     rig = Rig(executor, trial_duration_s=1.0, ilc_memory_path=str(memory_file))
     rig.ball(START)
-    assert spin_until(executor, lambda: rig.controller.position is not None)
+    assert spin_until(executor, lambda: rig.controller.session.position is not None)
     rig.task(TARGET, mode='pid_ilc', trial_id=0)
 
     def camera_glitches():
@@ -249,16 +249,16 @@ def test_obstacles_set_the_alert_regions_the_follower_repels_from(executor):
     rig = Rig(executor)
     node = rig.controller
     assert node.get_parameter('path.repulsion_gain').value == 1.0
-    assert node.follower.params.repulsion_gain == 1.0
+    assert node.session.follower.params.repulsion_gain == 1.0
     assert not node.set_parameters([Parameter('path.repulsion_gain', value=2.0)])[0].successful
     obstacles_pub = rig.probe.create_publisher(String, 'obstacles', LATCHED_QOS)
     box = Cuboid(min=(0.035, 0.04, 0.65), max=(0.14, 0.14, 0.78), name='box')
     obstacles_pub.publish(to_string_msg(ObstacleSet('world', 0.03, (box,))))  # wrong frame
     rig.spin(0.3)
-    assert node.follower.alert_regions.shape == (0, 2, 3)
+    assert node.session.follower.alert_regions.shape == (0, 2, 3)
     obstacles_pub.publish(to_string_msg(ObstacleSet('sra_mount', 0.03, (box,))))
-    assert spin_until(executor, lambda: len(node.follower.alert_regions) == 1)
-    np.testing.assert_allclose(node.follower.alert_regions[0],
+    assert spin_until(executor, lambda: len(node.session.follower.alert_regions) == 1)
+    np.testing.assert_allclose(node.session.follower.alert_regions[0],
                                [[0.005, 0.01, 0.62], [0.17, 0.17, 0.81]], atol=1e-12)
 
 

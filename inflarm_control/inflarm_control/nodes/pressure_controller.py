@@ -1,25 +1,15 @@
 """PID + iterative learning control of the soft arm's chamber pressures (Fig 6 of 001_...).
 
-A trial drives the ball on the arm's end from where it is to a target at ``rate_hz``: every step
-takes the latest ball position, runs the three axis controllers and publishes the valve set
-pressures. After ``trial_duration_s`` the trial's outputs become the ILC memory of that target
-(seeding the next ``pid_ilc`` trial to it), a TrialReport is published, and the last pressures
-are held. Without a memory, a ``pid_ilc`` task is seeded from the experiential knowledge database
-(when one is configured). Trials drive the bellows by the paper's quadrant rule, the scheme the
+The ROS adapter of `inflarm_control.pressure_control.PressureControlSession`: trials from
+``control_task`` at ``rate_hz``, each seeded by the target's ILC memory or the experiential
+knowledge database (``pid_ilc``), learning its memory when it ends, then holding its last
+pressures; planned paths followed by `inflarm_control.path_following.PathFollower` (a
+reference moving at up to ``path.speed_mps`` that waits for the arm, the knowledge database's
+holding pressures as feedforward, a PI per axis, bellows pairs driven antagonistically around
+``path.bellows_preload_pa``, repulsion from the alert regions of ``obstacles`` with
+``path.repulsion_gain``), their last waypoint then held until the next task, path,
+``~/stop`` or ``~/vent``. Trials drive the bellows by the paper's quadrant rule, the scheme the
 ILC memories and the knowledge database were learned with.
-
-A planned path (section 4.2) is followed by `inflarm_control.path_following.PathFollower`: a
-reference moving along it at up to ``path.speed_mps`` that waits for the arm (it slows down
-from ``path.slow_error_m`` and stops at ``path.stop_error_m`` of error), the knowledge
-database's holding pressures at the waypoints as feedforward (``knowledge.holding_pressure``;
-PI alone without a database or where it has no knowledge), and a PI per axis (``path.kp``,
-``path.ki``) from the pressures held when the path arrives (no jump). After its end the path's
-last waypoint is held, under control, until the next task, path, ``~/stop`` or ``~/vent``.
-While following, every bellows pair is driven antagonistically around ``path.bellows_preload_pa``
-(``pid_ilc`` module docstring): no bellows exhausts as the end crosses an axis. While the
-measured end is inside an alert region of the latest ``obstacles`` (each box grown by the set's
-``alert_margin``), the follower pulls its target towards the region's border with
-``path.repulsion_gain`` (section 4.3.2; `PathFollower` module docstring).
 
 Subscribes:
     ball_position (geometry_msgs/PointStamped, SENSOR_QOS): measured end point [m]; a point
@@ -54,9 +44,6 @@ Times (trial steps, measurement freshness) are on the node clock, so that a repl
 ``use_sim_time`` runs the same steps.
 """
 
-import math
-import os
-
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -64,13 +51,13 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from inflarm_control.knowledge import KnowledgeDatabase, holding_pressure, seed_memory
-from inflarm_control.path_following import PathFollower, PathFollowingParams
-from inflarm_control.pid_ilc import PidIlcController, PidIlcParams
-from inflarm_control.trial_metrics import TrialMetrics
+from inflarm_control.knowledge import KnowledgeDatabase
+from inflarm_control.path_following import PathFollowingParams
+from inflarm_control.pid_ilc import PidIlcParams
+from inflarm_control.pressure_control import PressureControlSession, SessionStep, TrialLimits
 from inflarm_model.alert_regions import regions_of
-from inflarm_model.soft_arm import CHAMBERS, Workspace, check_in_workspace
-from inflarm_msgs_json import ControlTask, ObstacleSet, PressureCommand, TrialReport
+from inflarm_model.soft_arm import CHAMBERS
+from inflarm_msgs_json import ControlTask, ObstacleSet, PressureCommand
 from inflarm_msgs_json.ros.conversions import from_string_msg, to_string_msg
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
@@ -168,25 +155,20 @@ def path_following_params(p: dict, core: PidIlcParams) -> PathFollowingParams:
         repulsion_gain=p['path.repulsion_gain'], workspace=core.workspace)
 
 
-def task_key(target: np.ndarray) -> tuple[int, int, int]:
-    """ILC memories are kept per target, to the millimetre."""
-    return tuple(int(v) for v in np.round(np.asarray(target) * 1000.0))
-
-
-def grown(workspace: Workspace, margin: float) -> Workspace:
-    """``workspace`` grown by ``margin`` [m] on every side."""
-    return Workspace(f'{workspace.name}, grown by {margin} m', workspace.x_max + margin,
-                     workspace.y_max + margin, workspace.z_min - margin,
-                     workspace.z_max + margin)
+def trial_limits(p: dict) -> TrialLimits:
+    """The trials' runtime limits from the node's parameters."""
+    return TrialLimits(trial_duration=p['trial_duration_s'],
+                       measurement_timeout=p['measurement_timeout_s'],
+                       reach_tolerance=p['reach_tolerance_m'])
 
 
 class PressureController(GuardedCallbacks, Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('pressure_controller', **kwargs)
-        self.params = declare_parameters(self, PARAMETERS)
+        self.params = declare_parameters(self, PARAMETERS, on_set=self.on_parameters_set)
         p = self.params
-        self.core_params = PidIlcParams(
+        core = PidIlcParams(
             kp=tuple(p['gains.kp']), ki=tuple(p['gains.ki']), kd=tuple(p['gains.kd']),
             p_set=tuple(p['limits.p_set_pa']), p_max=tuple(p['limits.p_max_pa']),
             rate_hz=p['rate_hz'], learning_gain=tuple(p['learning.gain']),
@@ -195,22 +177,11 @@ class PressureController(GuardedCallbacks, Node):
             learning_dead_band=p['learning.dead_band_m'],
             learning_feedback_gain=tuple(p['learning.feedback_gain']),
             quadrant_bellows=tuple(tuple(q.split(',')) for q in p['quadrant_bellows']))
-        self.controller = PidIlcController(n=1, params=self.core_params)
-        self.follower = PathFollower(path_following_params(p, self.core_params))
-        self.dt = 1.0 / p['rate_hz']
-        self.memories = self.load_memories(p['ilc_memory_path'])
-        self.knowledge = (KnowledgeDatabase.open(p['knowledge_db_path'])
-                          if p['knowledge_db_path'] else None)
-        self.measurable = grown(self.core_params.workspace, p['workspace_margin_m'])
-
-        self.position: np.ndarray | None = None
-        self.position_time_ns: int | None = None  # node clock
-        self.task: ControlTask | None = None
-        self.trial_active = False
-        self.trial_steps = 0
-        self.metrics: TrialMetrics | None = None
-        self.following = False  # a path is being followed (or its end held)
-        self.command: np.ndarray | None = None  # last published set pressures, held when idle
+        self.session = PressureControlSession(
+            core, path_following_params(p, core), trial_limits(p), p['workspace_margin_m'],
+            memory_path=p['ilc_memory_path'] or None,
+            knowledge=(KnowledgeDatabase.open(p['knowledge_db_path'])
+                       if p['knowledge_db_path'] else None))
 
         self.create_guarded_subscription(
             PointStamped, 'ball_position', self.on_ball_position, SENSOR_QOS)
@@ -228,10 +199,16 @@ class PressureController(GuardedCallbacks, Node):
         self.create_guarded_service(Trigger, '~/stop', self.on_stop)
         self.create_guarded_service(Trigger, '~/vent', self.on_vent)
         self.create_guarded_service(Trigger, '~/reset_learning', self.on_reset_learning)
-        self.create_guarded_timer(self.dt, self.step)
+        self.create_guarded_timer(self.session.dt, self.step)
         self.get_logger().info(
-            f"ready: {p['rate_hz']} Hz, {len(self.memories)} ILC memories, knowledge database "
-            f"{'loaded' if self.knowledge is not None else 'none'}")
+            f"ready: {p['rate_hz']} Hz, {len(self.session.memories)} ILC memories, knowledge "
+            f"database {'loaded' if self.session.knowledge is not None else 'none'}")
+
+    def on_parameters_set(self, changed: dict) -> None:
+        self.session.limits = trial_limits(self.params)
+
+    def now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
 
     # -- inputs --------------------------------------------------------------------------------
 
@@ -240,22 +217,18 @@ class PressureController(GuardedCallbacks, Node):
             raise InputError('frame', f"frame_id '{frame_id}' is not '{self.params['frame_id']}'")
 
     def on_ball_position(self, msg: PointStamped) -> None:
-        point = np.array([msg.point.x, msg.point.y, msg.point.z])
         self.check_frame(msg.header.frame_id)
-        check_in_workspace(point, self.measurable, 'ball_position')
-        self.position = point
-        self.position_time_ns = self.get_clock().now().nanoseconds
+        self.session.measure((msg.point.x, msg.point.y, msg.point.z), self.now_ns())
 
     def on_control_task(self, msg: String) -> None:
         task = from_string_msg(msg, expected=ControlTask)
         self.check_frame(task.frame_id)
-        self.following = False
         self.start_task(task)
 
     def on_obstacles(self, msg: String) -> None:
         obstacles = from_string_msg(msg, expected=ObstacleSet)
         self.check_frame(obstacles.frame_id)
-        self.follower.set_alert_regions(regions_of(obstacles))
+        self.session.set_alert_regions(regions_of(obstacles))
         gain = self.params['path.repulsion_gain']
         self.get_logger().info(
             f'{len(obstacles.obstacles)} obstacles: repelling from their alert regions '
@@ -268,178 +241,80 @@ class PressureController(GuardedCallbacks, Node):
         self.check_frame(msg.header.frame_id)
         waypoints = np.array([[ps.pose.position.x, ps.pose.position.y, ps.pose.position.z]
                               for ps in msg.poses])
-        check_in_workspace(waypoints, self.core_params.workspace, 'waypoint')
-        if self.position is None:
-            raise InputError('path', 'path rejected: no ball_position received yet')
-        feedforward, source = None, 'PI alone'
-        if self.knowledge is not None:
-            try:
-                feedforward = np.array([holding_pressure(self.knowledge, w) for w in waypoints])
-                source = 'knowledge database feedforward'
-            except (KeyError, ValueError) as err:
-                self.problems.warn('path', f'no knowledge along the path ({err}): PI alone',
-                                   kind='no knowledge')
-        held = np.zeros(len(CHAMBERS)) if self.command is None else self.command
-        self.abort_trial()
-        self.follower.start(waypoints, self.position, held, feedforward)
-        self.following = True
+        source, problem = self.session.follow(waypoints)
+        if problem:
+            self.problems.warn('path', problem, kind='no knowledge')
         self.get_logger().info(f'following a path of {len(waypoints)} waypoints, '
-                               f'{self.follower.length:.3f} m ({source})')
+                               f'{self.session.follower.length:.3f} m ({source})')
 
     # -- trials --------------------------------------------------------------------------------
 
     def start_task(self, task: ControlTask) -> bool:
-        """Start a trial of ``task`` from the current position, its outputs starting at the
-        held pressures; False (logged) if it can't."""
-        if self.position is None:
-            self.get_logger().error(
-                f'task to {list(task.target)} rejected: no ball_position received yet')
-            return False
-        target = np.array(task.target)
-        memory, source = None, 'PID alone'
-        if task.mode == 'pid_ilc' and task_key(target) in self.memories:
-            memory, source = self.memories[task_key(target)], 'ILC memory'
-        elif task.mode == 'pid_ilc' and self.knowledge is not None:
-            try:
-                memory, source = seed_memory(self.knowledge, target), 'knowledge database'
-            except (KeyError, ValueError) as err:
-                self.get_logger().warning(f'no knowledge for this task: {err}')
-        initial_output = np.zeros(len(CHAMBERS)) if self.command is None else self.command
+        """Start a trial of ``task``; False (logged) if it can't."""
         try:
-            self.controller.start_trial(self.position, target, memory,
-                                        initial_output=initial_output)
+            source, problem = self.session.start_task(task)
         except ValueError as err:
-            self.get_logger().error(f'task to {list(task.target)} rejected: {err}')
+            self.get_logger().error(str(err))
             return False
-        self.task = task
-        self.trial_active = True
-        self.trial_steps = 0
-        self.metrics = TrialMetrics(target, self.params['reach_tolerance_m'])
+        if problem:
+            self.get_logger().warning(problem)
         self.get_logger().info(f'trial {task.trial_id} ({task.mode}, {source}) to '
-                               f'{np.round(target, 4).tolist()}')
+                               f'{np.round(task.target, 4).tolist()}')
         return True
 
     def step(self) -> None:
-        if self.following:
-            self.step_path()
-            return
-        if not self.trial_active:
-            if self.command is not None:
-                self.publish_command(self.command)  # hold: the MCU vents a silent controller
-            return
-        fresh = self.fresh_position()
-        position = self.position if fresh else np.full(3, np.nan)
-        command = self.controller.step(position[None, :], self.dt, valid=[fresh])[0]
-        self.publish_command(command)
-        self.trial_steps += 1
-        elapsed = self.trial_steps * self.dt
-        if fresh:
-            self.metrics.add(self.position, elapsed)
-        if elapsed >= self.params['trial_duration_s']:
-            self.finish_trial()
-
-    def fresh_position(self) -> bool:
-        """Whether the latest ball position is recent enough to act on (warns if not)."""
-        fresh = (self.position_time_ns is not None
-                 and (self.get_clock().now().nanoseconds - self.position_time_ns) * 1e-9
-                 <= self.params['measurement_timeout_s'])
-        if not fresh:
+        result: SessionStep = self.session.step(self.now_ns())
+        if result.stale:
             self.problems.warn('step', 'no fresh ball_position: holding the pressures, '
                                        'not learning', kind='stale')
-        return fresh
-
-    def step_path(self) -> None:
-        was_at_end = self.follower.at_end
-        fresh = self.fresh_position()
-        self.publish_command(self.follower.step(self.position, self.dt, valid=fresh))
-        if self.follower.at_end and not was_at_end:
+        if result.command is not None:
+            self.publish_command(result.command)
+        if result.path_end:
             self.get_logger().info('path followed to its end; holding its last waypoint')
-
-    def finish_trial(self) -> None:
-        memory = self.controller.finish_trial()[0]
-        self.trial_active = False
-        self.memories[task_key(self.controller.target[0])] = memory
-        self.save_memories()
-        rmse = self.metrics.rmse[0]
-        reach = [None if math.isinf(t) else float(t) for t in self.metrics.reach_time[0]]
-        report = TrialReport(trial_index=self.task.trial_id, rmse=tuple(np.nan_to_num(rmse)),
-                             reach_time=tuple(reach))
-        self.report_pub.publish(to_string_msg(report))
-        self.get_logger().info(
-            f'trial {self.task.trial_id} done: RMSE {np.round(rmse * 1000, 1).tolist()} mm, '
-            f'reach time {reach} s; holding')
+        if result.report is not None:
+            report = result.report
+            self.report_pub.publish(to_string_msg(report))
+            self.get_logger().info(
+                f'trial {report.trial_index} done: RMSE '
+                f'{np.round(np.array(report.rmse) * 1000, 1).tolist()} mm, reach time '
+                f'{list(report.reach_time)} s; holding')
 
     def publish_command(self, command: np.ndarray) -> None:
-        self.command = command
         chambers = dict(zip(CHAMBERS, command.tolist(), strict=True))
         self.command_pub.publish(to_string_msg(PressureCommand(chambers=chambers)))
 
     # -- services ------------------------------------------------------------------------------
 
     def on_start_trial(self, request, response):
-        if self.task is None:
-            response.success, response.message = False, 'no task yet: publish a control_task'
+        try:
+            task, source, problem = self.session.repeat_task()
+        except ValueError as err:
+            response.success, response.message = False, str(err)
             return response
-        task = ControlTask(frame_id=self.task.frame_id, target=self.task.target,
-                           mode=self.task.mode, trial_id=self.task.trial_id + 1)
-        self.following = False
-        response.success = self.start_task(task)
-        response.message = f'trial {task.trial_id} started' if response.success else 'rejected'
+        if problem:
+            self.get_logger().warning(problem)
+        response.success, response.message = True, f'trial {task.trial_id} started'
+        self.get_logger().info(f'trial {task.trial_id} ({task.mode}, {source}) to '
+                               f'{np.round(task.target, 4).tolist()}')
         return response
 
-    def abort_trial(self) -> None:
-        if self.trial_active:
-            self.controller.finish_trial()  # discarded: an aborted trial teaches nothing
-            self.trial_active = False
-        self.following = False
-
     def on_stop(self, request, response):
-        self.abort_trial()
+        self.session.stop()
         response.success, response.message = True, 'stopped; holding the last pressures'
         self.get_logger().info(response.message)
         return response
 
     def on_vent(self, request, response):
-        self.abort_trial()
-        self.publish_command(np.zeros(len(CHAMBERS)))
+        self.publish_command(self.session.vent())
         response.success, response.message = True, 'venting every chamber'
         self.get_logger().info(response.message)
         return response
 
     def on_reset_learning(self, request, response):
-        count = len(self.memories)
-        self.memories.clear()
-        self.save_memories()
+        count = self.session.reset_learning()
         response.success, response.message = True, f'forgot {count} ILC memories'
         self.get_logger().info(response.message)
         return response
-
-    # -- ILC memory file -----------------------------------------------------------------------
-
-    def load_memories(self, path: str) -> dict[tuple[int, int, int], np.ndarray]:
-        if not path or not os.path.exists(path):
-            return {}
-        try:
-            with np.load(path) as data:
-                keys, memories = data['targets_mm'], data['memories']
-            shape = (len(keys), self.core_params.memory_steps, len(CHAMBERS))
-            if keys.shape != (len(keys), 3) or memories.shape != shape:
-                raise ValueError(f'arrays of shape {keys.shape} and {memories.shape}')
-        except (OSError, KeyError, ValueError) as err:
-            raise ValueError(f"ilc_memory_path '{path}' is not an ILC memory file: {err}") from err
-        return {tuple(int(v) for v in key): memory for key, memory in zip(keys, memories,
-                                                                           strict=True)}
-
-    def save_memories(self) -> None:
-        path = self.params['ilc_memory_path']
-        if not path:
-            return
-        shape = (0, self.core_params.memory_steps, len(CHAMBERS))
-        keys = np.array(list(self.memories), dtype=np.int64).reshape(-1, 3)
-        memories = np.array(list(self.memories.values())).reshape(-1, *shape[1:])
-        tmp = path + '.tmp.npz'
-        np.savez(tmp, targets_mm=keys, memories=memories)
-        os.replace(tmp, path)  # atomic: a crash never leaves half a file
 
 
 def main(args: list[str] | None = None) -> None:
