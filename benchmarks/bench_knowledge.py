@@ -1,13 +1,13 @@
 """Speed of the experiential knowledge database (section 3.2 of 001_...).
 
-Prints, for the paper's full 67,200-point grid (a 32 MB file in a temporary directory):
+Prints, for the paper's full 67,200-point grid (32 MB of .npy arrays in a temporary directory):
 
 - lookup time per call [us] of ``KnowledgeDatabase.lookup`` (target <= 10 us) against two
   baselines measured in the same run: a nearest search with ``np.argmin`` over the points
   array, and a plain dict keyed by the whole-centimetre coordinates (rounding + dict + decode,
   the cheapest Python alternative);
-- open time [ms] of the full file (target: the worst of 20 opens <= 50 ms), against
-  ``np.fromfile`` reading it all;
+- open time [ms] of the full database (target: the worst of 20 opens <= 50 ms), against
+  ``np.fromfile`` reading its codes all;
 - with ``--full-build``: wall time of ``build_knowledge_database`` over all 67,200 points
   (target <= 120 s on the 2-core machine; ~70 s on the physical plant);
 - in the full run (and with ``--distributed``): build speed [points/s] on a Dask cluster of 1 and
@@ -49,15 +49,15 @@ def bench_lookup_and_open(tmp: Path, n_targets: int, n_argmin: int, rounds: int,
                           opens: int) -> dict:
     """Per call [us] of the lookups and their baselines; open and read-all times [ms]."""
     rng = np.random.default_rng(7)
-    path = tmp / 'knowledge.db'
+    path = tmp / 'knowledge'
     with KnowledgeDatabase.create(path) as db:
         for start in range(0, DEFAULT_GRID.size, 8192):
             idx = np.arange(start, min(start + 8192, DEFAULT_GRID.size))
             db.write(idx, rng.uniform(0.0, 40e3, size=(len(idx), 50, 5)))
-    size_mb = path.stat().st_size / 1e6
+    size_mb = sum(f.stat().st_size for f in path.iterdir()) / 1e6
 
     opening = interleaved({'open': lambda: KnowledgeDatabase.open(path).close(),
-                           'read all': lambda: np.fromfile(path, dtype=np.uint8)},
+                           'read all': lambda: np.fromfile(path / 'codes.npy', dtype=np.uint8)},
                           opens, number=1)
 
     db = KnowledgeDatabase.open(path)
@@ -107,7 +107,7 @@ def bench_lookup_and_open(tmp: Path, n_targets: int, n_argmin: int, rounds: int,
 
 def bench_full_build(tmp: Path, batch_size: int | None, workers: int, progress: bool) -> dict:
     """Wall time [s] of the full build."""
-    path = tmp / 'built.db'
+    path = tmp / 'built'
     kwargs = {} if batch_size is None else {'batch_size': batch_size}
     t0 = time.perf_counter()
     db = build_knowledge_database(path, plant_factory=knowledge_plant, progress=progress,
@@ -124,19 +124,23 @@ SCALING_GRID = KnowledgeGrid(DEFAULT_GRID.origin, DEFAULT_GRID.spacing, (40, 40,
 SCALING_BLOCK = 800
 
 
+def _bytes(path: Path) -> bytes:
+    return b''.join((path / name).read_bytes() for name in sorted(p.name for p in path.iterdir()))
+
+
 def bench_distributed_build(tmp: Path) -> dict:
     """Build speed [points/s] in this process, on the local pool of 2 and on Dask clusters of 1
     and 2 workers, over `SCALING_GRID`, and the machine's load (1-min load average, the larger
-    of before and after); raises if a file differs from the local build's."""
+    of before and after); raises if a database differs from the local build's."""
     from distributed import Client, LocalCluster
 
     def build(name: str, **where) -> float:
-        path = tmp / f'{name}.db'
+        path = tmp / name
         t0 = time.perf_counter()
         build_knowledge_database(path, SCALING_GRID, plant_factory=knowledge_plant,
                                  batch_size=SCALING_BLOCK, progress=False, **where).close()
         speed = SCALING_GRID.size / (time.perf_counter() - t0)
-        if path.read_bytes() != (tmp / 'here.db').read_bytes():
+        if _bytes(path) != _bytes(tmp / 'here'):
             raise AssertionError(f'the {name} build differs from the local one')
         return speed
 
@@ -161,7 +165,7 @@ def rows(lookup: dict, build: dict | None, scaling: dict | None = None) -> list[
         Row('KnowledgeDatabase.lookup (tuple)', lookup['lookup'], 'us',
             'np.argmin nearest search', lookup['argmin']),
         Row(f"KnowledgeDatabase.open, worst of {lookup['opens']}", lookup['open_worst_ms'], 'ms',
-            'np.fromfile of the whole file', lookup['read_all_ms'],
+            'np.fromfile of the whole codes.npy', lookup['read_all_ms'],
             Target(at_most=OPEN_TARGET_MS), f"median {lookup['open_median_ms']:.3f} ms"),
     ]
     if build is not None:

@@ -602,7 +602,7 @@ def main(argv: list[str] | None = None) -> int:
         port = os.path.join(tempfile.mkdtemp(prefix='inflarm-mcu-'), 'mcu')
     os.environ.update(ros_environment())
     started = time.monotonic()
-    knowledge = build_knowledge(out / 'knowledge.db')
+    knowledge = build_knowledge(out / 'knowledge')
     print(f'[demo] knowledge database of the scenario region built in '
           f'{time.monotonic() - started:.1f} s', flush=True)
     nodes = demo_nodes(Backend(args.backend, port), knowledge, args.seed, out / 'bag',

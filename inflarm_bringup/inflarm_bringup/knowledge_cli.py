@@ -2,15 +2,17 @@
 
 Runs the learning trials against the simulated plant (``inflarm_hw.sra_plant``) for every
 knowledge point of the 1 cm grid
-(67,200 points; about 1.5 min on two cores) and writes the memory-mapped database to OUT, which
+(67,200 points; about 1.5 min on two cores) and writes the memory-mapped database (a directory
+of .npy files) to OUT, which
 the pressure controller's ``knowledge_db_path`` parameter then reads. An interrupted build
 resumes where it stopped. With ``--scheduler tcp://HOST:8786`` the blocks of points are learned
-by the workers of a Dask distributed cluster instead of local processes (same file, same bytes);
+by the workers of a Dask distributed cluster instead of local processes (same files, same
+bytes);
 an unreachable scheduler or a worker of another version exits with status 2 and the reason.
 
 The plant is `knowledge_plant`: the default simulated arm, valve delay included (the memory is
 learned on the arm's dynamics as they are), measured exactly: measurement noise would only make
-a rebuild differ from the file it rebuilds.
+a rebuild differ from the database it rebuilds.
 """
 
 import argparse
@@ -28,7 +30,7 @@ def knowledge_plant(n: int) -> SoftArmPlant:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='inflarm-build-knowledge',
                                      description=__doc__.splitlines()[0].split(': ', 1)[1])
-    parser.add_argument('out', help='database file to write (or resume)')
+    parser.add_argument('out', help='database directory to write (or resume)')
     parser.add_argument('--trials', type=int, default=30, help='learning trials per point')
     parser.add_argument('--workers', type=int, default=None,
                         help='local processes (default: one per core; not with --scheduler)')

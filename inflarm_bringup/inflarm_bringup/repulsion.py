@@ -128,7 +128,7 @@ def feedforward_along(path: npt.ArrayLike, directory: str | Path | None = None
     """Holding pressures at the waypoints from a knowledge database learnt on the noise-free
     plant over `KNOWLEDGE_GRID` (about 10 s), shape (M, 5) [Pa]."""
     with tempfile.TemporaryDirectory() as tmp:
-        where = Path(directory or tmp) / 'knowledge.db'
+        where = Path(directory or tmp) / 'knowledge'
         db = build_knowledge_database(where, KNOWLEDGE_GRID, plant_factory=knowledge_plant,
                                       progress=False)
         try:

@@ -10,7 +10,7 @@ learning controller starts "experienced" (eqs. (1), (4) of 001_...).
 
 `build_knowledge_database` runs those trials on a plant it is given (the simulated arm,
 ``inflarm_hw.sra_plant``, in ``inflarm-build-knowledge``), thousands of points at once;
-`KnowledgeDatabase` stores them in one memory-mapped file; `nearest_knowledge_point` snaps a
+`KnowledgeDatabase` stores them in memory-mapped .npy arrays; `nearest_knowledge_point` snaps a
 target to the grid without any file.
 
 Frame and units: everything here is in the mount frame ``sra_mount`` in metres (origin at the
@@ -29,31 +29,18 @@ i.e. within half a spacing of the outermost grid values: x, y in [-0.195, 0.205)
 per horizontal axis cannot be symmetric about 0 on a whole-centimetre grid, so the workspace
 strip x or y in [-0.202, -0.195) m is not covered.)
 
-File format (version 1, little-endian, one memory-mapped file)::
+Storage (format 2): a directory of standard numpy files, memory-mapped, that numpy alone reads
+(``np.load(path / 'codes.npy', mmap_mode='r')``)::
 
-    offset  size  field
-         0     8  magic b'INFLKDB\\x00'
-         8     4  u32 version (1)
-        12     4  u32 header size (128)
-        16    24  3 x f64 grid origin [m]
-        40     8  f64 grid spacing [m]
-        48    12  3 x u32 grid shape (nx, ny, nz)
-        60     4  u32 steps per point (50)
-        64     4  u32 chambers (5, order ``CHAMBERS``)
-        68     4  reserved (0)
-        72     8  f64 control rate [Hz] (5.0)
-        80     8  f64 pressure scale [Pa per LSB]
-        88     8  u64 mask offset (128)
-        96     8  u64 data offset
-       104     8  u64 total file size [bytes]
-       112    12  reserved (0)
-       124     4  u32 CRC-32 of bytes 0..123
-       128     n  u8 filled mask, one byte per point (0 or 1), padded to a multiple of 64
-  data_off       u16 codes, C order (point, step, chamber)
+    knowledge.json   the metadata: format version (2), grid origin [m], spacing [m] and shape
+                     (nx, ny, nz), steps per point (50), chambers (``CHAMBERS`` order), control
+                     rate [Hz] (5.0), pressure scale [Pa per LSB]
+    codes.npy        uint16 little-endian, shape (points, steps, chambers): the pressure codes
+    filled.npy       bool, shape (points,): which points hold a memory
 
-Points are numbered in C order over (ix, iy, iz): ``index = (ix * ny + iy) * nz + iz``. The data
-section of the full grid is 67,200 x 50 x 5 x 2 = 33,600,000 B (the paper's 32.04 MiB); the
-header and mask add 67,328 B. Pressures are stored as ``code = round(p / scale)`` clamped to
+Points are numbered in C order over (ix, iy, iz): ``index = (ix * ny + iy) * nz + iz``. The codes
+of the full grid are 67,200 x 50 x 5 x 2 = 33,600,000 B (the paper's 32.04 MiB); the mask adds
+67,200 B. Pressures are stored as ``code = round(p / scale)`` clamped to
 [0, 65535], decoded as ``p = code * scale``. The default 15 Pa/LSB gives a full scale of
 983.025 kPa, above the 0-900 kPa range of the ITV2050 valves (and the controller's 100 kPa output
 limit), with a round-trip error of at most 7.5 Pa.
@@ -68,13 +55,13 @@ import hashlib
 import importlib.metadata
 import importlib.util
 import itertools
+import json
 import math
 import os
 from pathlib import Path
+import shutil
 import socket
-import struct
 import sys
-import zlib
 
 import numpy as np
 import numpy.typing as npt
@@ -107,13 +94,8 @@ DEFAULT_SCALE_PA_PER_LSB = 15.0
 #: Start point of every learning trial, the paper's (0, 0, 604) mm [m, sra_mount].
 HOME_POINT = (0.0, 0.0, 0.604)
 
-_MAGIC = b'INFLKDB\x00'
-_VERSION = 1
-_HEADER_SIZE = 128
-_HEADER = struct.Struct('<8sII3dd3IIIIddQQQ12x')
-_CRC = struct.Struct('<I')
-_CRC_OFFSET = _HEADER_SIZE - _CRC.size
-_MASK_ALIGN = 64
+_FORMAT = 2
+_METADATA, _CODES, _FILLED = 'knowledge.json', 'codes.npy', 'filled.npy'
 _CODE_MAX = 65535
 _AXES = ('x', 'y', 'z')
 # Rounding offset in cells: 0.5 plus a hair, so the inclusive lower bound survives float error
@@ -311,12 +293,12 @@ class KnowledgeDatabase:
     Memory-mapped store of the learned chamber pressures of every knowledge point.
 
     Build one with :meth:`create` (or :func:`build_knowledge_database`) and reopen it with
-    :meth:`open`. Nothing is read eagerly: opening maps the file and checks its header.
+    :meth:`open`. Nothing is read eagerly: opening maps the arrays and checks the metadata.
 
     Attributes
     ----------
     path : pathlib.Path
-        The database file.
+        The database directory (module docstring: storage).
     grid : KnowledgeGrid
         The knowledge points.
     steps : int
@@ -329,31 +311,19 @@ class KnowledgeDatabase:
         ``'r'`` (read only) or ``'r+'`` (read and write).
     """
 
-    def __init__(
-        self,
-        path: Path,
-        grid: KnowledgeGrid,
-        steps: int,
-        rate_hz: float,
-        scale: float,
-        mode: str,
-        layout: tuple[int, int, int],
-    ) -> None:
-        # Private: use create() or open(), which validate the file first.
+    def __init__(self, path: Path, grid: KnowledgeGrid, steps: int, rate_hz: float,
+                 scale: float, mode: str, codes: np.memmap, filled: np.memmap) -> None:
+        # Private: use create() or open(), which validate the files first.
         self.path = path
         self.grid = grid
         self.steps = steps
         self.rate_hz = rate_hz
         self.scale = scale
         self.mode = mode
-        mask_offset, data_offset, _ = layout
-        self._map = np.memmap(path, dtype=np.uint8, mode=mode)
+        self._maps = (codes, filled)
         # Plain ndarray views: indexing a memmap subclass costs a few us per call.
-        raw = self._map.view(np.ndarray)
-        self._mask = raw[mask_offset : mask_offset + grid.size]
-        self._data = (
-            raw[data_offset:].view('<u2').reshape(grid.size, steps, N_CHAMBERS)
-        )
+        self._data = codes.view(np.ndarray)
+        self._mask = filled.view(np.ndarray).view(np.uint8)
 
     @classmethod
     def create(
@@ -366,13 +336,13 @@ class KnowledgeDatabase:
         overwrite: bool = False,
     ) -> KnowledgeDatabase:
         """
-        Create an empty database file (nothing filled) and open it for writing.
+        Create an empty database directory (nothing filled) and open it for writing.
 
         Parameters
         ----------
         path : str or os.PathLike
-            File to create. Its size is fixed by the grid: the data alone is
-            ``grid.size * steps * 5 * 2`` bytes (sparse until written where supported).
+            Directory to create. The codes alone are ``grid.size * steps * 5 * 2`` bytes
+            (sparse until written where supported).
         grid : KnowledgeGrid, optional
             Knowledge points; the paper's 67,200-point grid by default.
         steps : int, optional
@@ -382,7 +352,7 @@ class KnowledgeDatabase:
         scale : float, optional
             Pressure per stored LSB [Pa]; full scale is ``65535 * scale``.
         overwrite : bool, optional
-            Replace an existing file instead of raising.
+            Replace an existing database instead of raising.
 
         Returns
         -------
@@ -401,26 +371,37 @@ class KnowledgeDatabase:
         path = Path(path)
         if path.exists() and not overwrite:
             raise ValueError(f'expected path to not exist (or overwrite=True), got {str(path)!r}')
-        layout = _layout(grid, int(steps))
-        header = _HEADER.pack(
-            _MAGIC, _VERSION, _HEADER_SIZE, *grid.origin, grid.spacing, *grid.shape,
-            int(steps), N_CHAMBERS, 0, rate_hz, scale, *layout,
-        )
-        with open(path, 'wb') as f:
-            f.write(header + _CRC.pack(zlib.crc32(header)))
-            # Extending with truncate keeps the file sparse: creation costs no 32 MB write.
-            f.truncate(layout[2])
-        return cls(path, grid, int(steps), rate_hz, scale, 'r+', layout)
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
+        path.mkdir()
+        metadata = {'format': _FORMAT, 'grid': {'origin': list(grid.origin),
+                                                'spacing': grid.spacing,
+                                                'shape': list(grid.shape)},
+                    'steps': int(steps), 'chambers': list(CHAMBERS), 'rate_hz': rate_hz,
+                    'scale_pa_per_lsb': scale}
+        try:
+            (path / _METADATA).write_text(json.dumps(metadata, indent=2) + '\n')
+            # open_memmap extends the files without writing them: no 32 MB write.
+            codes = np.lib.format.open_memmap(path / _CODES, 'w+', '<u2',
+                                              (grid.size, int(steps), N_CHAMBERS))
+            filled = np.lib.format.open_memmap(path / _FILLED, 'w+', np.bool_, (grid.size,))
+        except OSError as err:
+            shutil.rmtree(path, ignore_errors=True)  # half a database would not open
+            raise OSError(err.errno, f'cannot create the knowledge database {str(path)!r}: '
+                          f'{err.strerror}') from err
+        return cls(path, grid, int(steps), rate_hz, scale, 'r+', codes, filled)
 
     @classmethod
     def open(cls, path: str | os.PathLike, mode: str = 'r') -> KnowledgeDatabase:
         """
-        Map an existing database file, checking its header but reading no pressures.
+        Map an existing database, checking its metadata but reading no pressures.
 
         Parameters
         ----------
         path : str or os.PathLike
-            A file written by :meth:`create`.
+            A directory written by :meth:`create`.
         mode : {'r', 'r+'}, optional
             Read only, or read and write.
 
@@ -431,54 +412,43 @@ class KnowledgeDatabase:
         Raises
         ------
         ValueError
-            If the mode is unknown, or the file is not a version-1 knowledge database, its
-            header is corrupt (CRC) or inconsistent, or it is truncated.
+            If the mode is unknown, or ``path`` is not a format-2 knowledge database, its
+            metadata is inconsistent with its arrays, or an array is truncated or garbled.
         """
         if mode not in ('r', 'r+'):
             raise ValueError(f"expected mode 'r' or 'r+', got {mode!r}")
         path = Path(path)
-        with open(path, 'rb') as f:
-            head = f.read(_HEADER_SIZE)
-            file_size = os.fstat(f.fileno()).st_size
         name = str(path)
-        if len(head) < _HEADER_SIZE:
-            raise ValueError(
-                f'expected a knowledge database of at least {_HEADER_SIZE} B at {name!r},'
-                f' got {len(head)} B (truncated header)'
-            )
-        fields = _HEADER.unpack(head[:_CRC_OFFSET])
-        if fields[0] != _MAGIC:
-            raise ValueError(
-                f'expected a knowledge database at {name!r} (magic {_MAGIC!r}),'
-                f' got magic {fields[0]!r}'
-            )
-        if fields[1] != _VERSION:
-            raise ValueError(f'expected knowledge database version {_VERSION}, got {fields[1]}')
-        (crc,) = _CRC.unpack(head[_CRC_OFFSET:])
-        if crc != zlib.crc32(head[:_CRC_OFFSET]):
-            raise ValueError(f'knowledge database header at {name!r} is corrupt (CRC mismatch)')
-        header_size, origin, spacing, shape = fields[2], fields[3:6], fields[6], fields[7:10]
-        steps, chambers, rate_hz, scale = fields[10], fields[11], fields[13], fields[14]
-        layout = tuple(fields[15:18])
+        if path.is_file() and _starts_with(path, b'INFLKDB\x00'):
+            raise ValueError(f'{name!r} is a knowledge database of format 1 (one file), before '
+                             f'format {_FORMAT} (a directory of .npy files): rebuild it with '
+                             'inflarm-build-knowledge')
         try:
-            grid = KnowledgeGrid(origin=origin, spacing=spacing, shape=shape)
-        except ValueError as err:
-            raise ValueError(f'knowledge database at {name!r} has an invalid grid: {err}') from err
-        if (
-            header_size != _HEADER_SIZE
-            or chambers != N_CHAMBERS
-            or steps < 1
-            or not (rate_hz > 0.0 and scale > 0.0)
-            or layout != _layout(grid, steps)
-        ):
-            raise ValueError(f'knowledge database header at {name!r} is inconsistent')
-        if file_size != layout[2]:
-            raise ValueError(
-                f'expected knowledge database {name!r} of {layout[2]} B, got {file_size} B'
-                + (' (truncated)' if file_size < layout[2] else '')
-            )
-        db = cls(path, grid, steps, rate_hz, scale, mode, layout)
-        if np.any(db._mask > 1):  # 67 kB: cheap, and catches a garbled mask section
+            metadata = json.loads((path / _METADATA).read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise ValueError(f'expected a knowledge database directory at {name!r} with '
+                             f'{_METADATA}: {err}') from None
+        if not isinstance(metadata, dict) or metadata.get('format') != _FORMAT:
+            found = metadata.get('format') if isinstance(metadata, dict) else metadata
+            raise ValueError(f'expected knowledge database format {_FORMAT} at {name!r}, got '
+                             f'{found!r}')
+        try:
+            g = metadata['grid']
+            grid = KnowledgeGrid(origin=tuple(g['origin']), spacing=g['spacing'],
+                                 shape=tuple(g['shape']))
+            steps, rate_hz = metadata['steps'], float(metadata['rate_hz'])
+            scale, chambers = float(metadata['scale_pa_per_lsb']), metadata['chambers']
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f'knowledge database at {name!r} has invalid metadata: '
+                             f'{err!r}') from None
+        if (chambers != list(CHAMBERS) or not isinstance(steps, int) or steps < 1
+                or not (rate_hz > 0.0 and scale > 0.0)):
+            raise ValueError(f'knowledge database at {name!r} has inconsistent metadata')
+        codes = _load_array(path / _CODES, mode, np.dtype('<u2'),
+                            (grid.size, steps, N_CHAMBERS))
+        filled = _load_array(path / _FILLED, mode, np.dtype(np.bool_), (grid.size,))
+        db = cls(path, grid, steps, rate_hz, scale, mode, codes, filled)
+        if np.any(db._mask > 1):  # 67 kB: cheap, and catches a garbled mask
             raise ValueError(f'knowledge database at {name!r} has a corrupt filled mask')
         return db
 
@@ -537,7 +507,7 @@ class KnowledgeDatabase:
         KeyError
             If the nearest knowledge point holds no memory yet.
         """
-        if self._mask is None:
+        if self._maps is None:
             self._check_open()
         idx, gx, gy, gz = self.grid._flat_index(*_coerce_point(point))
         if not self._mask[idx]:
@@ -601,22 +571,23 @@ class KnowledgeDatabase:
         if not np.all(np.isfinite(memory)):
             raise ValueError('expected finite memory [Pa], got NaN or inf')
         self._data[idx] = encode_pressure(memory, self.scale).reshape(expected)
-        # Data before mask, so an interrupted build never marks a point with stale codes.
         self._mask[idx] = 1
 
     def flush(self) -> None:
-        """Write pending changes to disk."""
-        if self.mode == 'r+' and self._map is not None:
-            self._map.flush()
+        """Write pending changes to disk: the codes before the marks, so that an interrupted
+        build never marks a point whose codes are not on disk."""
+        if self.mode == 'r+' and self._maps is not None:
+            for array in self._maps:
+                array.flush()
 
     def _check_open(self) -> None:
-        if self._map is None:
+        if self._maps is None:
             raise ValueError(f'expected an open database, {str(self.path)!r} is closed')
 
     def close(self) -> None:
-        """Flush and release the mapping (the views die with it)."""
+        """Flush and release the mappings (the views die with them)."""
         self.flush()
-        self._map = self._mask = self._data = None
+        self._maps = self._mask = self._data = None
 
 
 def seed_memory(db: KnowledgeDatabase, target: npt.ArrayLike) -> npt.NDArray[np.float64]:
@@ -696,7 +667,7 @@ def holding_pressure(db: KnowledgeDatabase, point: npt.ArrayLike) -> npt.NDArray
 class ClusterError(RuntimeError):
     """The Dask cluster cannot run a knowledge build: its scheduler is unreachable or has no
     worker, a worker runs other code than the client, or a block was lost with every worker
-    that tried it. The file keeps every block written so far: fix the cause and resume."""
+    that tried it. The database keeps every block written so far: fix the cause and resume."""
 
 
 @dataclass(frozen=True)
@@ -877,8 +848,8 @@ def build_knowledge_database(
     chamber outputs of the first ``memory_steps`` steps of the last trial are stored. Points are
     learned in blocks of ``batch_size`` consecutive flat indices (the plant is vectorized over
     the arms of a block), in this process, in a local pool of processes, or on a Dask cluster;
-    the executor of the blocks is the only difference. This process alone writes the file, a
-    block at a time (its memories, then its filled marks). An existing file is resumed: only
+    the executor of the blocks is the only difference. This process alone writes the database,
+    a block at a time (its memories, then its filled marks). An existing one is resumed: only
     points not yet filled are learned, so an interrupted build can be restarted.
 
     The blocks are fixed by the grid (block ``k`` holds indices ``k * batch_size`` to
@@ -890,7 +861,7 @@ def build_knowledge_database(
     Parameters
     ----------
     path : str or os.PathLike
-        Database file; created if missing, resumed if present (unless ``overwrite``). Its full
+        Database directory; created if missing, resumed if present (unless ``overwrite``). Its full
         size is reserved before anything is learned.
     grid : KnowledgeGrid, optional
         Knowledge points; the paper's 67,200 by default.
@@ -922,7 +893,7 @@ def build_knowledge_database(
         same code as this process (`code_fingerprint` of every loaded ``inflarm*`` package);
         a worker that dies loses only the block it was learning, which Dask reruns elsewhere.
     overwrite : bool, optional
-        Start from an empty file even if ``path`` exists.
+        Start from an empty database even if ``path`` exists.
     progress : bool, optional
         Show a tqdm progress bar over points.
 
@@ -934,10 +905,10 @@ def build_knowledge_database(
     Raises
     ------
     ValueError
-        On bad arguments, a scale too coarse for the controller's ``p_max``, or an existing file
-        whose grid, steps, rate or scale differ from the requested ones.
+        On bad arguments, a scale too coarse for the controller's ``p_max``, or an existing
+        database whose grid, steps, rate or scale differ from the requested ones.
     OSError
-        If the file cannot be created, or its size reserved (``ENOSPC``: the disk is full).
+        If the database cannot be created, or its size reserved (``ENOSPC``: the disk is full).
     ClusterError
         If the scheduler cannot be reached or has no worker, a worker runs another version, or
         a block was lost with every worker that tried it.
@@ -1018,22 +989,23 @@ def build_knowledge_database(
                 shown.update(len(block.index))
     except BaseException:
         learned.close()  # stops the pool or the cluster's futures first
-        db.close()  # every block written so far stays: the file resumes
+        db.close()  # every block written so far stays: the database resumes
         raise
     db.flush()
     return db
 
 
 def _reserve(path: Path) -> None:
-    # Allocate the whole file now: a full disk then stops the build here with ENOSPC, not later
-    # with a SIGBUS in the writer on a page of a sparse file. Allocating keeps the bytes.
-    size = path.stat().st_size
-    with open(path, 'r+b') as f:
-        try:
-            os.posix_fallocate(f.fileno(), 0, size)
-        except OSError as err:
-            raise OSError(err.errno, f'cannot reserve the {size} B of the knowledge database'
-                          f' {str(path)!r}: {err.strerror}') from err
+    # Allocate the whole arrays now: a full disk then stops the build here with ENOSPC, not
+    # later with a SIGBUS in the writer on a page of a sparse file. Allocating keeps the bytes.
+    for name in (_CODES, _FILLED):
+        size = (path / name).stat().st_size
+        with open(path / name, 'r+b') as f:
+            try:
+                os.posix_fallocate(f.fileno(), 0, size)
+            except OSError as err:
+                raise OSError(err.errno, f'cannot reserve the {size} B of the knowledge '
+                              f'database {str(path / name)!r}: {err.strerror}') from err
 
 
 def encode_pressure(pressure: npt.ArrayLike, scale: float) -> npt.NDArray[np.uint16]:
@@ -1073,11 +1045,22 @@ def decode_pressure(code: npt.ArrayLike, scale: float) -> npt.NDArray[np.float64
     return np.asarray(code, dtype=np.uint16) * float(scale)
 
 
-def _layout(grid: KnowledgeGrid, steps: int) -> tuple[int, int, int]:
-    # (mask offset, data offset, file size) in bytes.
-    mask_bytes = -(-grid.size // _MASK_ALIGN) * _MASK_ALIGN
-    data_offset = _HEADER_SIZE + mask_bytes
-    return _HEADER_SIZE, data_offset, data_offset + grid.size * steps * N_CHAMBERS * 2
+def _starts_with(path: Path, prefix: bytes) -> bool:
+    with open(path, 'rb') as f:
+        return f.read(len(prefix)) == prefix
+
+
+def _load_array(path: Path, mode: str, dtype: np.dtype, shape: tuple[int, ...]) -> np.memmap:
+    """Map the .npy file at ``path``, or raise ValueError unless it holds ``dtype``, ``shape``."""
+    try:
+        array = np.load(path, mmap_mode=mode)
+    except (OSError, ValueError) as err:  # missing, not .npy, or shorter than its header says
+        raise ValueError(f'knowledge database array {str(path)!r} cannot be mapped: '
+                         f'{err}') from None
+    if not isinstance(array, np.memmap) or array.dtype != dtype or array.shape != shape:
+        raise ValueError(f'expected knowledge database array {str(path)!r} of {dtype} '
+                         f'{shape}, got {array.dtype} {array.shape}')
+    return array
 
 
 def _is_single_point(point: npt.ArrayLike) -> bool:

@@ -17,7 +17,7 @@ def declared(node) -> set[str]:
 
 @pytest.mark.parametrize('backend', [Backend('sim'), Backend('sim_mcu', '/tmp/inflarm-mcu')])
 def test_every_node_with_a_seed_gets_the_demo_s(backend, tmp_path: pathlib.Path):
-    nodes = demo_nodes(backend, tmp_path / 'knowledge.db', 3, tmp_path / 'bag', 'sqlite3')
+    nodes = demo_nodes(backend, tmp_path / 'knowledge', 3, tmp_path / 'bag', 'sqlite3')
     seeded = [n for n in nodes if 'seed' in declared(n)]
     # arm_sim and sra_sim, or sim_mcu (both arms behind the bridge)
     assert {n.executable for n in seeded} == (
@@ -25,4 +25,4 @@ def test_every_node_with_a_seed_gets_the_demo_s(backend, tmp_path: pathlib.Path)
     for node in seeded:
         assert node.parameters.get('seed') == 3, (node.executable, node.parameters)
     (controller,) = (n for n in nodes if n.executable == 'pressure_controller')
-    assert controller.parameters['knowledge_db_path'] == str(tmp_path / 'knowledge.db')
+    assert controller.parameters['knowledge_db_path'] == str(tmp_path / 'knowledge')

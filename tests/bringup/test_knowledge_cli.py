@@ -14,7 +14,7 @@ NEAREST_INDEX = (30 * 40 + 29) * 42 + 15
 
 
 def test_builds_a_database_for_every_knowledge_point(tmp_path, capsys):
-    out = tmp_path / 'knowledge.db'
+    out = tmp_path / 'knowledge'
     assert main([str(out), '--trials', '1']) == 0
     assert '67200 knowledge points' in capsys.readouterr().out
     with KnowledgeDatabase.open(out) as db:
@@ -28,7 +28,7 @@ def test_builds_a_database_for_every_knowledge_point(tmp_path, capsys):
 
 
 def test_an_unwritable_output_fails_with_a_message(tmp_path, capsys):
-    assert main([str(tmp_path / 'missing' / 'knowledge.db'), '--trials', '1']) == 1
+    assert main([str(tmp_path / 'missing' / 'knowledge'), '--trials', '1']) == 1
     assert 'inflarm-build-knowledge:' in capsys.readouterr().err
 
 
@@ -39,12 +39,12 @@ def test_an_unreachable_scheduler_exits_2_naming_it(tmp_path, capsys):
 
     address = f'tcp://127.0.0.1:{free_port()}'
     with dask.config.set({'distributed.comm.timeouts.connect': '1s'}):
-        assert main([str(tmp_path / 'knowledge.db'), '--scheduler', address]) == 2
+        assert main([str(tmp_path / 'knowledge'), '--scheduler', address]) == 2
     err = capsys.readouterr().err
     assert f'inflarm-build-knowledge: cannot reach the Dask scheduler at {address!r}' in err
 
 
 def test_workers_and_a_scheduler_together_are_refused(tmp_path, capsys):
-    assert main([str(tmp_path / 'knowledge.db'), '--scheduler', 'tcp://127.0.0.1:8786',
+    assert main([str(tmp_path / 'knowledge'), '--scheduler', 'tcp://127.0.0.1:8786',
                  '--workers', '2']) == 1
     assert 'expected workers=None with a scheduler' in capsys.readouterr().err

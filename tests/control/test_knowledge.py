@@ -1,7 +1,7 @@
 """Tests of the experiential knowledge database (section 3.2 of 001_...)."""
 
+import json
 import os
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -133,7 +133,7 @@ def test_nearest_knowledge_point_needs_a_grid():
 
 
 def test_closed_database_refuses_use(tmp_path):
-    db = KnowledgeDatabase.create(tmp_path / 'k.db', SMALL)
+    db = KnowledgeDatabase.create(tmp_path / 'k', SMALL)
     db.close()
     with pytest.raises(ValueError, match='is closed'):
         db.lookup((0.05, -0.02, 0.70))
@@ -155,9 +155,9 @@ def test_round_trip_is_within_half_an_lsb(tmp_path):
     rng = np.random.default_rng(7)
     scale = 2.5  # Pa per LSB
     memory = random_memory(rng, SMALL.size, steps=8, full_scale=65535 * scale)
-    with KnowledgeDatabase.create(tmp_path / 'k.db', SMALL, steps=8, scale=scale) as db:
+    with KnowledgeDatabase.create(tmp_path / 'k', SMALL, steps=8, scale=scale) as db:
         db.write(np.arange(SMALL.size), memory)
-    db = KnowledgeDatabase.open(tmp_path / 'k.db')
+    db = KnowledgeDatabase.open(tmp_path / 'k')
     assert (db.grid, db.steps, db.rate_hz, db.scale) == (SMALL, 8, 5.0, 2.5)
     back = db.read(np.arange(SMALL.size))
     np.testing.assert_allclose(back, memory, rtol=0.0, atol=scale / 2 + 1e-9)
@@ -165,7 +165,7 @@ def test_round_trip_is_within_half_an_lsb(tmp_path):
 
 
 def test_pressures_are_clamped_to_the_code_range(tmp_path):
-    db = KnowledgeDatabase.create(tmp_path / 'k.db', SMALL, steps=2, scale=10.0)
+    db = KnowledgeDatabase.create(tmp_path / 'k', SMALL, steps=2, scale=10.0)
     memory = np.array([[-500.0, -4.0, 4.0, 6.0, 655_349.0], [655_360.0, 1e9, 0.0, 15.0, 25.0]])
     db.write(3, memory)
     expected = [[0.0, 0.0, 0.0, 10.0, 655_350.0], [655_350.0, 655_350.0, 0.0, 20.0, 20.0]]
@@ -175,7 +175,7 @@ def test_pressures_are_clamped_to_the_code_range(tmp_path):
 def test_lookup_returns_the_nearest_points_memory(tmp_path):
     rng = np.random.default_rng(7)
     memory = random_memory(rng, SMALL.size)
-    db = KnowledgeDatabase.create(tmp_path / 'k.db', SMALL)
+    db = KnowledgeDatabase.create(tmp_path / 'k', SMALL)
     db.write(np.arange(SMALL.size), memory)
     target = np.array((0.111, 0.013, 0.733))
     point, got = db.lookup(target)
@@ -191,14 +191,14 @@ def test_lookup_returns_the_nearest_points_memory(tmp_path):
 
 def test_filled_mask_tracks_writes_and_survives_reopening(tmp_path):
     rng = np.random.default_rng(7)
-    db = KnowledgeDatabase.create(tmp_path / 'k.db', SMALL)
+    db = KnowledgeDatabase.create(tmp_path / 'k', SMALL)
     assert db.n_filled == 0 and not db.has(7)
     with pytest.raises(KeyError, match='holds no memory'):
         db.lookup(SMALL.point_of(7))
     db.write([7, 11], random_memory(rng, 2))
     assert db.has(7) and db.has(11) and not db.has(8)
     db.close()
-    db = KnowledgeDatabase.open(tmp_path / 'k.db')
+    db = KnowledgeDatabase.open(tmp_path / 'k')
     np.testing.assert_array_equal(np.flatnonzero(db.filled), [7, 11])
     assert db.n_filled == 2
     with pytest.raises(ValueError, match='read-only'):
@@ -207,23 +207,32 @@ def test_filled_mask_tracks_writes_and_survives_reopening(tmp_path):
         db.read([7, 8])
 
 
-def test_full_size_file_holds_the_papers_32_mib(tmp_path):
-    db = KnowledgeDatabase.create(tmp_path / 'k.db')
+def test_full_size_database_holds_the_papers_32_mib_in_standard_npy_files(tmp_path):
+    db = KnowledgeDatabase.create(tmp_path / 'k', steps=50)
     data_bytes = 67_200 * 50 * 5 * 2
     assert data_bytes == 33_600_000
-    assert os.path.getsize(tmp_path / 'k.db') == 128 + 67_200 + data_bytes
     rng = np.random.default_rng(7)
     memory = random_memory(rng, 1)[0]
     db.write(67_199, memory)
     db.close()
-    db = KnowledgeDatabase.open(tmp_path / 'k.db')
+    # numpy alone reads it: the codes, the marks, the metadata
+    codes = np.load(tmp_path / 'k' / 'codes.npy', mmap_mode='r')
+    assert codes.dtype == np.dtype('<u2') and codes.shape == (67_200, 50, 5)
+    assert codes.nbytes == data_bytes
+    filled = np.load(tmp_path / 'k' / 'filled.npy')
+    np.testing.assert_array_equal(np.flatnonzero(filled), [67_199])
+    metadata = json.loads((tmp_path / 'k' / 'knowledge.json').read_text())
+    assert metadata['grid']['shape'] == [40, 40, 42] and metadata['scale_pa_per_lsb'] == 15.0
+    np.testing.assert_allclose(codes[67_199] * metadata['scale_pa_per_lsb'], memory,
+                               atol=DEFAULT_SCALE_PA_PER_LSB / 2 + 1e-9)
+    db = KnowledgeDatabase.open(tmp_path / 'k')
     np.testing.assert_allclose(
         db.lookup((0.2, 0.2, 0.99))[1], memory, atol=DEFAULT_SCALE_PA_PER_LSB / 2 + 1e-9
     )
 
 
 def test_write_validates_its_arguments(tmp_path):
-    db = KnowledgeDatabase.create(tmp_path / 'k.db', SMALL, steps=4)
+    db = KnowledgeDatabase.create(tmp_path / 'k', SMALL, steps=4)
     with pytest.raises(ValueError, match=r'memory of shape \(2, 4, 5\)'):
         db.write([0, 1], np.zeros((2, 50, 5)))
     with pytest.raises(ValueError, match='finite memory'):
@@ -232,17 +241,17 @@ def test_write_validates_its_arguments(tmp_path):
         db.write(-1, np.zeros((4, 5)))
     assert db.n_filled == 0
     db.close()
-    ro = KnowledgeDatabase.open(tmp_path / 'k.db', mode='r')
+    ro = KnowledgeDatabase.open(tmp_path / 'k', mode='r')
     with pytest.raises(ValueError, match="mode 'r\\+'"):
         ro.write(0, np.zeros((4, 5)))
 
 
 def test_create_validates_its_arguments(tmp_path):
-    KnowledgeDatabase.create(tmp_path / 'k.db', SMALL).close()
+    KnowledgeDatabase.create(tmp_path / 'k', SMALL).close()
     with pytest.raises(ValueError, match='path to not exist'):
-        KnowledgeDatabase.create(tmp_path / 'k.db', SMALL)
-    KnowledgeDatabase.create(tmp_path / 'k.db', SMALL, steps=3, overwrite=True).close()
-    assert KnowledgeDatabase.open(tmp_path / 'k.db').steps == 3
+        KnowledgeDatabase.create(tmp_path / 'k', SMALL)
+    KnowledgeDatabase.create(tmp_path / 'k', SMALL, steps=3, overwrite=True).close()
+    assert KnowledgeDatabase.open(tmp_path / 'k').steps == 3
     with pytest.raises(ValueError, match='scale > 0'):
         KnowledgeDatabase.create(tmp_path / 'x.db', SMALL, scale=0.0)
     with pytest.raises(ValueError, match='rate_hz > 0'):
@@ -253,49 +262,51 @@ def test_create_validates_its_arguments(tmp_path):
         KnowledgeDatabase.create(tmp_path / 'x.db', (40, 40, 42))
 
 
-def _corrupt(path: Path, offset: int, data: bytes) -> None:
-    with open(path, 'r+b') as f:
-        f.seek(offset)
-        f.write(data)
-
-
-def test_open_rejects_wrong_corrupt_and_truncated_files(tmp_path):
-    path = tmp_path / 'k.db'
+def test_open_rejects_what_is_not_a_database_and_truncated_or_mismatched_arrays(tmp_path):
+    path = tmp_path / 'k'
     KnowledgeDatabase.create(path, SMALL).close()
-    size = os.path.getsize(path)
     with pytest.raises(ValueError, match="mode 'r' or 'r\\+'"):
         KnowledgeDatabase.open(path, mode='w')
-
+    with pytest.raises(ValueError, match='expected a knowledge database directory'):
+        KnowledgeDatabase.open(tmp_path / 'missing')
     other = tmp_path / 'other.npy'
     np.save(other, np.zeros(1000))
-    with pytest.raises(ValueError, match='got magic'):
+    with pytest.raises(ValueError, match='expected a knowledge database directory'):
         KnowledgeDatabase.open(other)
 
-    short = tmp_path / 'short.db'
-    short.write_bytes(path.read_bytes()[:100])
-    with pytest.raises(ValueError, match='truncated header'):
-        KnowledgeDatabase.open(short)
-
-    os.truncate(path, size - 2)
-    with pytest.raises(ValueError, match=rf'of {size} B, got {size - 2} B \(truncated\)'):
+    codes = path / 'codes.npy'
+    size = os.path.getsize(codes)
+    os.truncate(codes, size - 2)
+    with pytest.raises(ValueError, match='codes.npy.* cannot be mapped'):
         KnowledgeDatabase.open(path)
-    os.truncate(path, size)
+    os.truncate(codes, size)
     KnowledgeDatabase.open(path).close()
 
-    _corrupt(path, 40, b'\x00')  # one byte of the spacing
-    with pytest.raises(ValueError, match='corrupt \\(CRC mismatch\\)'):
+    np.save(path / 'filled.npy', np.zeros(SMALL.size + 1, dtype=bool))
+    with pytest.raises(ValueError, match=rf'filled.npy.* of bool \({SMALL.size},\), got bool '
+                                         rf'\({SMALL.size + 1},\)'):
         KnowledgeDatabase.open(path)
 
 
-def test_open_rejects_a_garbled_mask_and_a_future_version(tmp_path):
-    path = tmp_path / 'k.db'
+def test_open_rejects_a_garbled_mask_another_format_and_names_a_format_1_file(tmp_path):
+    path = tmp_path / 'k'
     KnowledgeDatabase.create(path, SMALL).close()
-    _corrupt(path, 128 + 3, b'\x07')
+    mask = np.zeros(SMALL.size, dtype=np.uint8)
+    mask[3] = 7
+    np.save(path / 'filled.npy', mask.view(bool))
     with pytest.raises(ValueError, match='corrupt filled mask'):
         KnowledgeDatabase.open(path)
-    _corrupt(path, 8, b'\x02')
-    with pytest.raises(ValueError, match='version 1, got 2'):
+    metadata = json.loads((path / 'knowledge.json').read_text())
+    (path / 'knowledge.json').write_text(json.dumps({**metadata, 'format': 3}))
+    with pytest.raises(ValueError, match='format 2 at .*, got 3'):
         KnowledgeDatabase.open(path)
+    (path / 'knowledge.json').write_text(json.dumps({**metadata, 'steps': 'fifty'}))
+    with pytest.raises(ValueError, match='inconsistent metadata'):
+        KnowledgeDatabase.open(path)
+    old = tmp_path / 'old.db'
+    old.write_bytes(b'INFLKDB\x00' + bytes(120))
+    with pytest.raises(ValueError, match='format 1 .*rebuild it with inflarm-build-knowledge'):
+        KnowledgeDatabase.open(old)
 
 
 # --- building and seeding -------------------------------------------------------------------
@@ -306,7 +317,7 @@ AROUND = KnowledgeGrid(origin=(0.10, 0.09, 0.72), spacing=0.01, shape=(3, 3, 3))
 
 @pytest.fixture(scope='module')
 def built(tmp_path_factory):
-    path = tmp_path_factory.mktemp('kdb') / 'around.db'
+    path = tmp_path_factory.mktemp('kdb') / 'around'
     db = build_knowledge_database(path, AROUND, plant_factory=knowledge_plant, batch_size=10,
                                   workers=1, progress=False)
     yield db
@@ -353,7 +364,7 @@ def test_seeded_first_trial_reaches_within_10_s_faster_than_pid(built):
 
 
 def test_build_resumes_only_the_missing_points(tmp_path, built):
-    path = tmp_path / 'k.db'
+    path = tmp_path / 'k'
     with KnowledgeDatabase.create(path, AROUND) as db:
         db.write([0, 26], np.full((2, 50, 5), 150.0))
     db = build_knowledge_database(
@@ -367,7 +378,7 @@ def test_build_resumes_only_the_missing_points(tmp_path, built):
 
 def test_build_in_two_processes_matches_one(tmp_path, built):
     db = build_knowledge_database(
-        tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant, batch_size=14, workers=2,
+        tmp_path / 'k', AROUND, plant_factory=knowledge_plant, batch_size=14, workers=2,
         progress=False
     )
     np.testing.assert_allclose(db.read(np.arange(27)), built.read(np.arange(27)))
@@ -375,14 +386,14 @@ def test_build_in_two_processes_matches_one(tmp_path, built):
 
 def test_build_validates_its_arguments(tmp_path):
     with pytest.raises(ValueError, match='n_trials to be an int >= 1'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant,
+        build_knowledge_database(tmp_path / 'k', AROUND, plant_factory=knowledge_plant,
                                  n_trials=0)
     with pytest.raises(ValueError, match=r'scale >= 1\.526 Pa per LSB'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant,
+        build_knowledge_database(tmp_path / 'k', AROUND, plant_factory=knowledge_plant,
                                  scale=1.0)
-    KnowledgeDatabase.create(tmp_path / 'k.db', AROUND, steps=10).close()
+    KnowledgeDatabase.create(tmp_path / 'k', AROUND, steps=10).close()
     with pytest.raises(ValueError, match='to resume'):
-        build_knowledge_database(tmp_path / 'k.db', AROUND, plant_factory=knowledge_plant,
+        build_knowledge_database(tmp_path / 'k', AROUND, plant_factory=knowledge_plant,
                                  progress=False)
 
 
@@ -397,6 +408,6 @@ def test_seed_memory_is_the_nearest_points_memory(built):
         seed_memory(built, (0.2, 0.10, 0.73))
     with pytest.raises(ValueError, match='db to be a KnowledgeDatabase'):
         seed_memory(str(built.path), target)
-    empty = KnowledgeDatabase.create(built.path.with_name('empty.db'), AROUND)
+    empty = KnowledgeDatabase.create(built.path.with_name('empty'), AROUND)
     with pytest.raises(KeyError, match='holds no memory'):
         seed_memory(empty, target)

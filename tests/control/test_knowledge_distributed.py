@@ -37,12 +37,18 @@ BUILD = {'plant_factory': knowledge_plant, 'n_trials': TRIALS, 'batch_size': BLO
 BUILD_TIMEOUT_S = 120.0
 
 
+def database_bytes(path) -> bytes:
+    """A database's bytes: its metadata, codes and filled marks."""
+    return b''.join((path / name).read_bytes()
+                    for name in ('knowledge.json', 'codes.npy', 'filled.npy'))
+
+
 @pytest.fixture(scope='module')
 def local_bytes(tmp_path_factory):
-    """The file of the build on the local pool of two processes."""
-    path = tmp_path_factory.mktemp('local') / 'knowledge.db'
+    """The database of the build on the local pool of two processes, as bytes."""
+    path = tmp_path_factory.mktemp('local') / 'knowledge'
     build_knowledge_database(path, GRID, workers=2, **BUILD).close()
-    return path.read_bytes()
+    return database_bytes(path)
 
 
 @pytest.fixture
@@ -59,21 +65,21 @@ def cluster(tmp_path):
 
 
 def test_local_build_in_this_process_writes_the_pools_bytes(tmp_path, local_bytes):
-    path = tmp_path / 'knowledge.db'
+    path = tmp_path / 'knowledge'
     build_knowledge_database(path, GRID, workers=1, **BUILD).close()
-    assert path.read_bytes() == local_bytes
+    assert database_bytes(path) == local_bytes
 
 
 def test_build_on_dask_writes_the_local_builds_bytes(tmp_path, cluster, local_bytes):
-    path = tmp_path / 'knowledge.db'
+    path = tmp_path / 'knowledge'
     db = build_knowledge_database(path, GRID, scheduler=cluster.address, **BUILD)
     assert db.n_filled == GRID.size
     db.close()
-    assert path.read_bytes() == local_bytes
+    assert database_bytes(path) == local_bytes
 
 
 def test_a_worker_killed_mid_build_loses_only_its_block(tmp_path, cluster, local_bytes):
-    path = tmp_path / 'knowledge.db'
+    path = tmp_path / 'knowledge'
     with Client(cluster.address, set_as_default=False) as observer, \
             concurrent.futures.ThreadPoolExecutor(1) as thread:
         (victim,) = [address for address, pid in observer.run(os.getpid).items()
@@ -90,11 +96,11 @@ def test_a_worker_killed_mid_build_loses_only_its_block(tmp_path, cluster, local
     assert done_before_kill < GRID.size, 'the build finished before the kill'
     assert db.n_filled == GRID.size
     db.close()
-    assert path.read_bytes() == local_bytes
+    assert database_bytes(path) == local_bytes
 
 
 def test_a_build_whose_client_is_killed_resumes_on_dask(tmp_path, cluster, local_bytes):
-    path = tmp_path / 'knowledge.db'
+    path = tmp_path / 'knowledge'
     client = subprocess.Popen(knowledge_build_command(path, GRID, cluster.address, TRIALS, BLOCK))
     try:
         assert wait_until(lambda: filled_points(path) >= 2 or client.poll() is not None,
@@ -108,18 +114,18 @@ def test_a_build_whose_client_is_killed_resumes_on_dask(tmp_path, cluster, local
     assert interrupted % BLOCK == 0  # whole blocks only
     db = build_knowledge_database(path, GRID, scheduler=cluster.address, **BUILD)
     db.close()
-    assert path.read_bytes() == local_bytes
+    assert database_bytes(path) == local_bytes
 
 
 def test_an_unreachable_scheduler_stops_the_build_naming_it(tmp_path, local_bytes):
-    path = tmp_path / 'knowledge.db'
+    path = tmp_path / 'knowledge'
     address = f'tcp://127.0.0.1:{free_port()}'
     with dask.config.set({'distributed.comm.timeouts.connect': '2s'}), \
             pytest.raises(ClusterError, match=f'cannot reach the Dask scheduler at {address!r}'):
         build_knowledge_database(path, GRID, scheduler=address, **BUILD)
     assert filled_points(path) == 0
     build_knowledge_database(path, GRID, workers=2, **BUILD).close()  # resumable
-    assert path.read_bytes() == local_bytes
+    assert database_bytes(path) == local_bytes
 
 
 def other_version(directory: Path) -> dict[str, str]:
@@ -139,7 +145,7 @@ def test_a_worker_of_another_version_is_refused(tmp_path, local_bytes):
         dask_cluster.add_worker()
         dask_cluster.add_worker(environment=other_version(tmp_path / 'other'))
         dask_cluster.wait_for_workers(2)
-        path = tmp_path / 'knowledge.db'
+        path = tmp_path / 'knowledge'
         with pytest.raises(ClusterError, match=r"Dask workers \['tcp://127\.0\.0\.1:\d+'\] of"
                            r" .* run another version of .*inflarm_control"):
             build_knowledge_database(path, GRID, scheduler=dask_cluster.address, **BUILD)
@@ -147,11 +153,11 @@ def test_a_worker_of_another_version_is_refused(tmp_path, local_bytes):
     finally:
         dask_cluster.stop()
     build_knowledge_database(path, GRID, workers=2, **BUILD).close()  # resumable
-    assert path.read_bytes() == local_bytes
+    assert database_bytes(path) == local_bytes
 
 
 def test_a_worker_of_another_version_joining_mid_build_is_refused(tmp_path):
-    path = tmp_path / 'knowledge.db'
+    path = tmp_path / 'knowledge'
     dask_cluster = DaskCluster(tmp_path / 'cluster')
     try:
         dask_cluster.add_worker()
@@ -172,21 +178,26 @@ def test_a_worker_of_another_version_joining_mid_build_is_refused(tmp_path):
     assert filled_points(path) == GRID.size  # resumable
 
 
-def test_a_full_disk_stops_the_build_and_the_file_resumes(tmp_path, local_bytes):
-    # A 12 KiB tmpfs: room for the header, not for the 48 kB file.
+def test_a_full_disk_stops_the_build_and_the_database_resumes(tmp_path, local_bytes):
+    # An 8 KiB tmpfs: no room for the database's files (each takes a page, the codes two).
     disk = tmp_path / 'disk'
     disk.mkdir()
-    mount = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=12k', 'tmpfs', str(disk)],
+    mount = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=8k', 'tmpfs', str(disk)],
                            capture_output=True, text=True)
     if mount.returncode != 0:
         pytest.skip(f'cannot mount a small tmpfs here (needs root): {mount.stderr.strip()}')
     try:
-        path = disk / 'knowledge.db'
+        path = disk / 'knowledge'
+        with pytest.raises(OSError, match='cannot create the knowledge database .*No space'):
+            build_knowledge_database(path, GRID, workers=2, **BUILD)
+        assert not path.exists()  # half a database would not open
+        # 20 KiB: room for the files, not for the 48 kB of codes
+        subprocess.run(['mount', '-o', 'remount,size=20k', str(disk)], check=True)
         with pytest.raises(OSError, match='cannot reserve the \\d+ B of the knowledge database'
                            '.*No space left on device'):
             build_knowledge_database(path, GRID, workers=2, **BUILD)
         subprocess.run(['mount', '-o', 'remount,size=1m', str(disk)], check=True)
         build_knowledge_database(path, GRID, workers=2, **BUILD).close()
-        assert path.read_bytes() == local_bytes
+        assert database_bytes(path) == local_bytes
     finally:
         subprocess.run(['umount', '-l', str(disk)], check=False)

@@ -138,8 +138,8 @@ PARAMETERS = (
               range=(1, 1000000)),
     Parameter('ilc_memory_path', '', 'file keeping the ILC memories across runs (.npz); empty: '
               'in memory only', read_only=True),
-    Parameter('knowledge_db_path', '', 'experiential knowledge database seeding new pid_ilc '
-              'tasks; empty: none', read_only=True),
+    Parameter('knowledge_db_path', '', 'experiential knowledge database (a directory) seeding '
+              'new pid_ilc tasks; empty: none', read_only=True),
     Parameter('frame_id', 'sra_mount', 'frame of targets and measurements', read_only=True),
 )
 
