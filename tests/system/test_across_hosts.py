@@ -312,14 +312,14 @@ DASK_PORT = 8786  # free: nothing else runs in a new namespace
 @pytest.mark.system
 def test_a_knowledge_build_on_workers_across_the_link_writes_the_local_bytes(hosts, tmp_path):
     host_a, host_b = hosts
-    local = tmp_path / 'local.db'
+    local = tmp_path / 'local'
     build_knowledge_database(local, KNOWLEDGE_GRID, plant_factory=knowledge_plant,
                              n_trials=KNOWLEDGE_TRIALS, batch_size=KNOWLEDGE_BLOCK, workers=2,
                              progress=False).close()
     # The scheduler and the client on host A, two workers on host B: every block crosses the link.
     cluster = DaskCluster(tmp_path / 'cluster', host=host_a.address, port=DASK_PORT,
                           command=host_a.command)
-    path = tmp_path / 'distributed.db'
+    path = tmp_path / 'distributed'
     try:
         for _ in range(2):
             cluster.add_worker(host=host_b.address, command=host_b.command)
@@ -339,7 +339,8 @@ def test_a_knowledge_build_on_workers_across_the_link_writes_the_local_bytes(hos
     finally:
         cluster.stop()
     assert done_before_kill < KNOWLEDGE_GRID.size, 'the build finished before the kill'
-    assert path.read_bytes() == local.read_bytes()
+    for name in ('knowledge.json', 'codes.npy', 'filled.npy'):
+        assert (path / name).read_bytes() == (local / name).read_bytes(), name
     # The memories came over the link: 96 points x 50 steps x 5 chambers x 8 B.
     received = host_a.link_counters().rx_bytes - before.rx_bytes
     assert received > KNOWLEDGE_GRID.size * 50 * 5 * 8, received
