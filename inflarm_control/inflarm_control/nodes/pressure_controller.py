@@ -256,11 +256,14 @@ class PressureController(GuardedCallbacks, Node):
         except ValueError as err:
             self.get_logger().error(str(err))
             return False
+        self.log_trial_start(task, source, problem)
+        return True
+
+    def log_trial_start(self, task: ControlTask, source: str, problem: str | None) -> None:
         if problem:
             self.get_logger().warning(problem)
         self.get_logger().info(f'trial {task.trial_id} ({task.mode}, {source}) to '
                                f'{np.round(task.target, 4).tolist()}')
-        return True
 
     def step(self) -> None:
         result: SessionStep = self.session.step(self.now_ns())
@@ -291,11 +294,8 @@ class PressureController(GuardedCallbacks, Node):
         except ValueError as err:
             response.success, response.message = False, str(err)
             return response
-        if problem:
-            self.get_logger().warning(problem)
+        self.log_trial_start(task, source, problem)
         response.success, response.message = True, f'trial {task.trial_id} started'
-        self.get_logger().info(f'trial {task.trial_id} ({task.mode}, {source}) to '
-                               f'{np.round(task.target, 4).tolist()}')
         return response
 
     def on_stop(self, request, response):
