@@ -23,6 +23,7 @@ from inflarm_bringup.bag_regression import (
     regression,
     replay,
     retime_inputs,
+    timer_phase,
 )
 from inflarm_hw.bag import BagMessage, BagWriter, bag_info, read_messages, serialize, typestore
 from inflarm_msgs_json import ControlTask, TrialReport, decode
@@ -261,6 +262,21 @@ def test_an_unstamped_input_near_a_firing_goes_to_its_other_side_in_the_other_or
         delivered = retime_inputs(tasks, subscribers, {}, firings, order)
         assert [m.timestamp_ns for m, _ in delivered] == expected, order
         assert all(nodes == ('pressure_controller',) for _, nodes in delivered)
+
+
+def test_a_timer_delayed_by_a_loaded_machine_is_still_found_with_its_phase():
+    # A 50 Hz timer due at 3 ms + k 20 ms whose every other firing ran 5-7 ms late (a loaded
+    # machine): every late firing is one late burst, so the timer and its phase are found
+    # (the neighbour-gap test this replaced saw 1.3 and 0.7 periods and fell back to a grid).
+    period = 20_000_000
+    rng = np.random.default_rng(3)
+    firings = [3_000_000 + k * period + (int(rng.integers(5_000_000, 7_000_000)) if k % 2 else
+                                          int(rng.integers(0, 500_000))) for k in range(100)]
+    assert timer_phase(firings, period) == min(f - k * period for k, f in enumerate(firings))
+    # Times that are not a timer's: none of 100 draws is taken for one.
+    for seed in range(100):
+        times = np.sort(np.random.default_rng(seed).integers(0, 100 * period, 100))
+        assert timer_phase(times.tolist(), period) is None, seed
 
 
 def test_a_bag_without_the_needed_topics_is_rejected_with_what_is_missing(tmp_path, capsys):
