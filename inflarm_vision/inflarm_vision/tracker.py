@@ -27,7 +27,7 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
    it is high enough, the outline not too elongated, its radius in range, and the rays off it
    one hidden arc at most (`_one_hidden_arc`). The accepted candidate of highest confidence
-   wins.
+   wins (the search stops at one with every ray on its outline).
 
 `BallTracker` refines the fine outline at the position predicted from the last detections
 with their colour and blur (tracking mode), then searches the candidates around it (`_search`,
@@ -43,7 +43,6 @@ off the optical axis the ellipse's centre is not the image of the ball's centre.
 from dataclasses import dataclass
 import functools
 import math
-from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -204,7 +203,6 @@ _RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discrimina
 _LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BGR order
 _MIN_LUMA_CONTRAST = 10.0  # smallest step of luma across an edge of the luma pass [grey levels]
 _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures it again
-_SHAPE_FOUND = 0.85  # share of rays with an edge beyond which a refused outline is no ball's
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
@@ -503,18 +501,10 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
     return fit, inliers
 
 
-class _Pass(NamedTuple):
-    """What a pass of `_refine_at` found: the ball or None, and the share of its rays on which
-    an edge was found."""
-
-    detection: BallDetection | None
-    edge_share: float
-
-
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
                ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
                margin_px: float = 0.0, sigma: float | None = None,
-               channel: str = 'blind') -> '_Pass':
+               channel: str = 'blind') -> BallDetection | None:
     """Sub-pixel outline of a ball of colour ``ball_bgr`` near ``center`` with a radius near
     ``r0`` [px]: rays from ``center``, their edges (`_edges`, searched within
     ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust fit (`_fit_outline`). The edges are
@@ -524,10 +514,10 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     halves the chroma's), with each ray's inside level measured and either polarity (a shaded
     ball is brighter than its surround on one side, darker on another). None if the colour is
     unknown or too grey, the inside of the outline is not of that colour, or nothing around the
-    ball differs from it clearly; with the share of the rays on which an edge was found."""
+    ball differs from it clearly."""
     if ball_bgr is None or np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma,
                                                                              1.0):
-        return _Pass(None, 0.0)
+        return None
     blind, chroma = _channels(ball_bgr)
     n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
     cos, sin = _ray_directions(n_rays)
@@ -552,7 +542,7 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     strength = float(np.dot(ball_bgr, chroma))
     inner = max(1, int((r0 - half_width - t0) / _STEP))
     if not (samples[:, :inner] @ chroma).mean() > 0.5 * strength:
-        return _Pass(None, 0.0)
+        return None
     # the edge's signal: of the channels blind to the ball's colour (the plane orthogonal to
     # it in BGR: 0 inside however the ball is shaded), the one that best separates the ball's
     # samples from those around it (Fisher's discriminant in that plane); where nothing
@@ -568,7 +558,7 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     along = inside @ unit
     own = along > _SAME_COLOUR * np.sqrt(np.einsum('ij,ij->i', inside, inside))
     if own.sum() < 8:
-        return _Pass(None, 0.0)
+        return None
     inside = inside[own]
     if channel == 'luma':
         weights, inside_level = _LUMA, None
@@ -584,28 +574,26 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
             if (full_separation := _separation(inside, outside, full)) > separation:
                 weights, inside_level, separation = full, None, full_separation
         if separation < _ACCEPT_SEPARATION:
-            return _Pass(None, 0.0)  # nothing around it differs from it clearly: no edge
+            return None  # nothing around it differs from it clearly: no edge
     signal = samples @ weights
     edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma,
                          min_contrast=_MIN_LUMA_CONTRAST if channel == 'luma' else None)
-    edge_share = float(np.isfinite(edge).mean())
     directions = np.stack([cos, sin], axis=1)
     points = center + edge[:, None] * directions
     result = _fit_outline(points, center, directions, edge, r0)
     if result is None:
-        return _Pass(None, edge_share)
+        return None
     fit, inliers = result
     if not _one_hidden_arc(inliers, _MAX_HIDDEN_ARC if r0 >= _COARSE_MIN_RADIUS_PX
                            else _MAX_HIDDEN_ARC_SMALL):
-        return _Pass(None, edge_share)
+        return None
     (cx, cy), (fw, fh), angle = fit
     a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)
     major = math.radians(angle) if fw >= fh else math.radians(angle) + 0.5 * math.pi
     major = (major + 0.5 * math.pi) % math.pi - 0.5 * math.pi
-    return _Pass(BallDetection(center=np.array([cx, cy]), radius=math.sqrt(a * b),
-                               confidence=float(inliers.mean()), axes=np.array([a, b]),
-                               angle=major, edge_points=points[inliers],
-                               colour_bgr=ball_bgr, blur_px=sigma), edge_share)
+    return BallDetection(center=np.array([cx, cy]), radius=math.sqrt(a * b),
+                         confidence=float(inliers.mean()), axes=np.array([a, b]), angle=major,
+                         edge_points=points[inliers], colour_bgr=ball_bgr, blur_px=sigma)
 
 
 def _one_hidden_arc(inliers: npt.NDArray[np.bool_], max_hidden: float) -> bool:
@@ -658,12 +646,10 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
         colour = _disc_colour(image, center, r0, params)
     for channel in (('coarse', 'blind', 'luma') if r0 >= _COARSE_MIN_RADIUS_PX
                     else ('blind', 'luma')):
-        first, edge_share = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
-                                       sigma=sigma, channel=channel)
+        first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
+                           channel=channel)
         if first is not None:
             break
-        if edge_share >= _SHAPE_FOUND:
-            return None  # the outline was found, and is no ball's: so it is in any channel
     else:
         return None
     # the outline measured again with rays from its own centre: from an off-centre start the
@@ -685,7 +671,7 @@ def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: flo
         if fine is not None and fine.confidence >= enough:
             continue
         found = _refine_at(image, center, r0, colour, params, margin_px=margin_px,
-                           sigma=sigma, channel=channel).detection
+                           sigma=sigma, channel=channel)
         if found is not None and (fine is None or found.confidence > fine.confidence):
             fine = found
     return fine
@@ -798,6 +784,8 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
             return detection
         if best is None or detection.confidence > best.confidence:
             best = detection
+        if best.confidence >= 1.0:
+            break  # every ray on its outline: no later candidate can have more
     return best
 
 

@@ -72,3 +72,16 @@ def test_a_ball_a_quarter_hidden_by_a_bar_is_found():
         found += detection is not None and np.hypot(*(detection.center - case.center)) < 1.0
     # 83 % before the coarse channel became the fine pass's last resort
     assert found >= 0.85 * 60, found
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(117, 75), (67, 95)])
+def test_a_small_ball_whose_outline_the_first_channel_refuses_is_found_in_the_next(seed,
+                                                                                  quality):
+    # frames of the set: a ball of 6-7 px on the Hubble photograph's dark sky, in JPEG; the
+    # ball-blind pass finds edges on 86 % of the rays and no ball in them, luma finds it
+    # (missed while a refused outline on 85 % of the rays ended the search)
+    case = real_case(seed, quality)
+    assert case.conditions.photo == 'hubble' and case.radius < 7.5
+    detection = detect_ball(case.image)
+    assert detection is not None
+    assert np.hypot(*(detection.center - case.center)) < 1.0
