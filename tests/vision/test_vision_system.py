@@ -60,8 +60,10 @@ def test_ball_position_from_the_camera_follows_the_true_end_point(node_processes
         lambda m: diagnostics.append({v.key: v.value for v in m.status[0].values}), RELIABLE_QOS)
     command_pub = probe.create_publisher(String, 'chamber_pressure_command', COMMAND_QOS)
     executor.add_node(probe)
-    assert spin_until(executor, lambda: len(points) >= 2, timeout_s=30.0), \
-        node_processes.output()
+    # both streams before the window: the truth's writer may be discovered seconds after the
+    # tracker's (twice in three runs here: points stamped before the first truth received)
+    assert spin_until(executor, lambda: len(points) >= 2 and len(truth) >= 2, timeout_s=30.0), \
+        (len(points), len(truth), node_processes.output())
     # the images went on the chosen transport only (the probe takes neither)
     def counts(topic: str) -> tuple[int, int]:
         return probe.count_publishers(topic), probe.count_subscribers(topic)
@@ -80,23 +82,23 @@ def test_ball_position_from_the_camera_follows_the_true_end_point(node_processes
     # 5 images a second; best-effort 0.9 MB images over UDP lose some under load
     assert spin_until(executor, moving, timeout_s=45.0), (diagnostics[-5:],
                                                            node_processes.output())
-    # the truth of the latest image may still be on its way (50 Hz: seen 15 ms behind it); the
-    # images that come while we wait for it are not compared (their truth may not have come).
-    # Latest by stamp, not by arrival: twice in about 25 runs under load, a point arrived after
-    # one stamped a frame later, so arrival order is not relied on (nor for the truth).
+    # the truth of the last image may still be on its way (50 Hz: seen 15 ms behind it); the
+    # images that come while we wait for it are not compared (their truth may not have come)
     measured = points[start:]
-    latest = max(stamp_s(m) for m in measured)
-    assert spin_until(executor, lambda: max(stamp_s(m) for m in truth) >= latest,
-                      timeout_s=5.0)
+    last = stamp_s(measured[-1])
+    assert spin_until(executor, lambda: stamp_s(truth[-1]) >= last, timeout_s=5.0)
 
-    by_stamp = sorted(truth, key=stamp_s)
-    t_truth = np.array([stamp_s(m) for m in by_stamp])
-    p_truth = np.array([[m.point.x, m.point.y, m.point.z] for m in by_stamp])
+    t_truth = np.array([stamp_s(m) for m in truth])
+    p_truth = np.array([[m.point.x, m.point.y, m.point.z] for m in truth])
+    # an image is stamped at capture, up to its latency before its point arrives: the first of
+    # the window may predate the first truth received
+    measured = [m for m in measured if stamp_s(m) >= t_truth[0]]
+    assert len(measured) >= 18, (len(measured), t_truth[0])
     errors = []
     for msg in measured:
         t = stamp_s(msg)
         assert msg.header.frame_id == 'sra_mount'
-        assert t_truth[0] <= t <= t_truth[-1]
+        assert t <= t_truth[-1]
         expected = np.array([np.interp(t, t_truth, p_truth[:, k]) for k in range(3)])
         errors.append(np.array([msg.point.x, msg.point.y, msg.point.z]) - expected)
     errors = np.array(errors)
