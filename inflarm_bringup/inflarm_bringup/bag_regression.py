@@ -332,11 +332,13 @@ def timer_phase(times_ns: Sequence[int], period_ns: int) -> int | None:
 
     Messages within half a period of a burst's first are one burst (one firing may publish
     several messages). Delays (callback, transport, recorder) only ever make a burst later
-    than its firing, so the phase is the earliest burst modulo the period, and the bursts are
-    periodic when at least 80 % of them are within 40 % of a period after it. Each burst is
-    judged against the phase, not against its neighbours: one late firing on a loaded machine
-    is one late burst, not two gaps off the grid. Bursts at arbitrary times are within 40 %
-    of a period of any phase for 40 % of them.
+    than its firing, so the bursts of a timer gather just after its phase: they are periodic
+    when at least 80 % of them lie within 40 % of a period after one of them (modulo the
+    period), and the phase is the earliest such. Each burst is judged against that phase, not
+    against its neighbours: one late firing on a loaded machine is one late burst, not two
+    gaps off the grid, and a burst before the rest (a first message that came early) is left
+    out rather than taken for the phase. Bursts at arbitrary times gather so within a 40 %
+    window for about half of them at most.
 
     Returns
     -------
@@ -347,11 +349,16 @@ def timer_phase(times_ns: Sequence[int], period_ns: int) -> int | None:
     if len(starts) < _MIN_BURSTS:
         return None
     s = np.asarray(starts, dtype=np.int64)
-    residues = (s - s[0] + period_ns // 2) % period_ns - period_ns // 2
-    lateness = residues - residues.min()
-    if (lateness <= _LATE * period_ns).mean() < _ON_GRID_SHARE:
+    residues = (s - s[0]) % period_ns
+    # lateness[i, j]: how long after burst i's residue burst j's comes, modulo the period
+    lateness = (residues[None, :] - residues[:, None]) % period_ns
+    gathered = (lateness <= _LATE * period_ns).sum(axis=1)
+    if gathered.max() < _ON_GRID_SHARE * len(s):
         return None
-    return int(s[0] + residues.min())
+    # of the residues that gather the most, the one the others come after
+    best = np.nonzero(gathered == gathered.max())[0]
+    spread = [lateness[i][lateness[i] <= _LATE * period_ns].max() for i in best]
+    return int(s[0] + residues[best[int(np.argmax(spread))]])
 
 
 def bursts(times_ns: Sequence[int], period_ns: int) -> list[int]:
