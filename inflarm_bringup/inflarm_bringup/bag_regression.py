@@ -349,15 +349,17 @@ def timer_phase(times_ns: Sequence[int], period_ns: int) -> int | None:
     if len(starts) < _MIN_BURSTS:
         return None
     s = np.asarray(starts, dtype=np.int64)
-    residues = (s - s[0]) % period_ns
-    # lateness[i, j]: how long after burst i's residue burst j's comes, modulo the period
-    lateness = (residues[None, :] - residues[:, None]) % period_ns
-    gathered = (lateness <= _LATE * period_ns).sum(axis=1)
+    # residues sorted, and once more a period on (the window may wrap): the bursts within
+    # the window after residue i are i .. end[i] - 1 of that list (n log n: long bags)
+    residues = np.sort((s - s[0]) % period_ns)
+    wrapped = np.concatenate([residues, residues + period_ns])
+    end = np.searchsorted(wrapped, residues + _LATE * period_ns, side='right')
+    gathered = end - np.arange(len(residues))
     if gathered.max() < _ON_GRID_SHARE * len(s):
         return None
     # of the residues that gather the most, the one the others come after
     best = np.nonzero(gathered == gathered.max())[0]
-    spread = [lateness[i][lateness[i] <= _LATE * period_ns].max() for i in best]
+    spread = wrapped[end[best] - 1] - residues[best]
     return int(s[0] + residues[best[int(np.argmax(spread))]])
 
 
