@@ -375,20 +375,24 @@ class KnowledgeDatabase:
             shutil.rmtree(path)
         elif path.exists():
             path.unlink()
-        path.mkdir()
+        # Built beside ``path`` and renamed into place: a reader never maps half a database.
+        staging = path.with_name(f'.{path.name}.creating-{os.getpid()}')
+        shutil.rmtree(staging, ignore_errors=True)
+        staging.mkdir()
         metadata = {'format': _FORMAT, 'grid': {'origin': list(grid.origin),
                                                 'spacing': grid.spacing,
                                                 'shape': list(grid.shape)},
                     'steps': int(steps), 'chambers': list(CHAMBERS), 'rate_hz': rate_hz,
                     'scale_pa_per_lsb': scale}
         try:
-            (path / _METADATA).write_text(json.dumps(metadata, indent=2) + '\n')
+            (staging / _METADATA).write_text(json.dumps(metadata, indent=2) + '\n')
             # open_memmap extends the files without writing them: no 32 MB write.
-            codes = np.lib.format.open_memmap(path / _CODES, 'w+', '<u2',
+            codes = np.lib.format.open_memmap(staging / _CODES, 'w+', '<u2',
                                               (grid.size, int(steps), N_CHAMBERS))
-            filled = np.lib.format.open_memmap(path / _FILLED, 'w+', np.bool_, (grid.size,))
+            filled = np.lib.format.open_memmap(staging / _FILLED, 'w+', np.bool_, (grid.size,))
+            staging.rename(path)  # the maps stay valid: they hold the files, not their names
         except OSError as err:
-            shutil.rmtree(path, ignore_errors=True)  # half a database would not open
+            shutil.rmtree(staging, ignore_errors=True)
             raise OSError(err.errno, f'cannot create the knowledge database {str(path)!r}: '
                           f'{err.strerror}') from err
         return cls(path, grid, int(steps), rate_hz, scale, 'r+', codes, filled)
@@ -1054,7 +1058,7 @@ def _load_array(path: Path, mode: str, dtype: np.dtype, shape: tuple[int, ...]) 
     """Map the .npy file at ``path``, or raise ValueError unless it holds ``dtype``, ``shape``."""
     try:
         array = np.load(path, mmap_mode=mode)
-    except (OSError, ValueError) as err:  # missing, not .npy, or shorter than its header says
+    except (OSError, ValueError, EOFError) as err:  # missing, not .npy, empty or truncated
         raise ValueError(f'knowledge database array {str(path)!r} cannot be mapped: '
                          f'{err}') from None
     if not isinstance(array, np.memmap) or array.dtype != dtype or array.shape != shape:

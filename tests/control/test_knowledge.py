@@ -262,6 +262,25 @@ def test_create_validates_its_arguments(tmp_path):
         KnowledgeDatabase.create(tmp_path / 'x.db', (40, 40, 42))
 
 
+def test_a_database_appears_whole_to_a_reader_that_opens_it_while_it_is_created(
+        tmp_path, monkeypatch):
+    path = tmp_path / 'k'
+    seen_while_creating = []
+    open_memmap = np.lib.format.open_memmap
+
+    def open_memmap_and_look(*args, **kwargs):
+        seen_while_creating.append(path.exists())
+        return open_memmap(*args, **kwargs)
+
+    monkeypatch.setattr(np.lib.format, 'open_memmap', open_memmap_and_look)
+    with KnowledgeDatabase.create(path, SMALL) as db:
+        db.write([5], np.full((1, db.steps, 5), 1000.0))
+    assert seen_while_creating == [False, False]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['k']  # no staging left behind
+    with KnowledgeDatabase.open(path) as db:
+        assert db.n_filled == 1
+
+
 def test_open_rejects_what_is_not_a_database_and_truncated_or_mismatched_arrays(tmp_path):
     path = tmp_path / 'k'
     KnowledgeDatabase.create(path, SMALL).close()
@@ -275,11 +294,12 @@ def test_open_rejects_what_is_not_a_database_and_truncated_or_mismatched_arrays(
         KnowledgeDatabase.open(other)
 
     codes = path / 'codes.npy'
-    size = os.path.getsize(codes)
-    os.truncate(codes, size - 2)
-    with pytest.raises(ValueError, match='codes.npy.* cannot be mapped'):
-        KnowledgeDatabase.open(path)
-    os.truncate(codes, size)
+    written = codes.read_bytes()
+    for size in (len(written) - 2, 0):
+        os.truncate(codes, size)
+        with pytest.raises(ValueError, match='codes.npy.* cannot be mapped'):
+            KnowledgeDatabase.open(path)
+    codes.write_bytes(written)
     KnowledgeDatabase.open(path).close()
 
     np.save(path / 'filled.npy', np.zeros(SMALL.size + 1, dtype=bool))
