@@ -389,8 +389,13 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
 def _fisher(inside: npt.NDArray, outside: npt.NDArray) -> npt.NDArray[np.float64]:
     """Fisher's discriminant of two sets of samples (n, k): the unit weights ``w`` maximizing
     the separation of ``outside @ w`` above ``inside @ w``."""
-    scatter = np.cov(inside.T) + np.cov(outside.T) + _RIDGE * np.eye(inside.shape[1])
-    w = np.linalg.solve(scatter, outside.mean(axis=0) - inside.mean(axis=0))
+    inside, outside = inside.astype(np.float64), outside.astype(np.float64)
+    mean_in, mean_out = inside.mean(axis=0), outside.mean(axis=0)
+    d_in, d_out = inside - mean_in, outside - mean_out
+    # the two covariances (np.cov's, without its overhead) and the ridge
+    scatter = (d_in.T @ d_in / max(len(d_in) - 1, 1) + d_out.T @ d_out / max(len(d_out) - 1, 1)
+               + _RIDGE * np.eye(inside.shape[1]))
+    w = np.linalg.solve(scatter, mean_out - mean_in)
     return w / max(np.linalg.norm(w), 1e-12)
 
 
@@ -434,19 +439,21 @@ def _circles_through(a, b, c):
 
 def _circle_lsq(points):
     """Least-squares circle (Kasa, then Gauss-Newton on the geometric distance): centre,
-    radius."""
-    x, y = points[:, 0], points[:, 1]
-    m = np.stack([x, y, np.ones_like(x)], axis=1)
-    sol = np.linalg.lstsq(m, x * x + y * y, rcond=None)[0]
+    radius. Normal equations of the points about their mean (3 unknowns, well conditioned
+    there; a tenth of ``lstsq``'s cost on a hundred points)."""
+    mean = points.mean(axis=0)
+    d = points - mean
+    m = np.stack([d[:, 0], d[:, 1], np.ones(len(d))], axis=1)
+    sol = np.linalg.solve(m.T @ m, m.T @ (d * d).sum(axis=1))
     c = 0.5 * sol[:2]
     r = math.sqrt(max(sol[2] + c @ c, 1e-12))
     for _ in range(3):
-        d = points - c
-        rho = np.hypot(d[:, 0], d[:, 1])
-        jac = np.concatenate([-d / rho[:, None], -np.ones((len(rho), 1))], axis=1)
-        step = np.linalg.lstsq(jac, -(rho - r), rcond=None)[0]
+        off = d - c
+        rho = np.hypot(off[:, 0], off[:, 1])
+        jac = np.concatenate([-off / rho[:, None], -np.ones((len(rho), 1))], axis=1)
+        step = np.linalg.solve(jac.T @ jac, jac.T @ (r - rho))
         c, r = c + step[:2], r + step[2]
-    return c, float(r)
+    return c + mean, float(r)
 
 
 def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64],
@@ -563,8 +570,10 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     if channel == 'luma':
         weights, inside_level = _LUMA, None
     else:
-        other = np.cross(unit, blind)
-        plane = np.stack([blind, other / np.linalg.norm(other)])  # (2, 3)
+        # unit and blind are orthogonal unit vectors: their cross product is one too
+        other = (unit[1] * blind[2] - unit[2] * blind[1], unit[2] * blind[0] - unit[0] * blind[2],
+                 unit[0] * blind[1] - unit[1] * blind[0])
+        plane = np.array([blind, other])  # (2, 3)
         w2 = _fisher(inside @ plane.T, outside @ plane.T)
         weights = (w2 @ plane).astype(np.float32)
         inside_level = 0.0
@@ -678,10 +687,11 @@ def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: flo
 
 
 def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], scale: float,
-                min_radius_px: float,
-                params: DetectorParams) -> list[tuple[float, npt.NDArray[np.float64], float]]:
+                min_radius_px: float, params: DetectorParams,
+                limit: int | None = None) -> list[tuple[float, npt.NDArray[np.float64], float]]:
     """Where the ball may be in a colour mask of pixel size ``scale`` [image px]:
-    ``(score, centre, radius)`` in mask pixels, best first.
+    ``(score, centre, radius)`` in mask pixels, best first (the best ``limit`` only, if given:
+    the distance transforms of blobs that cannot reach them are not computed).
 
     Each blob's holes are filled (a highlight punches one). A round blob gives its centroid and
     the radius of its area; any blob also gives the largest disc inside it (the peak of its
@@ -700,7 +710,7 @@ def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], 
     for i in np.nonzero(parents >= 0)[0]:
         holes[parents[i]] = holes.get(parents[i], 0.0) + cv2.contourArea(contours[i])
     found = []
-    min_peak = 0.5 * min_radius_px / scale
+    inscribed = []  # (vividness, blob, x, y, area) of the blobs whose largest disc is a guess
     for i in np.nonzero(parents < 0)[0]:
         contour = contours[i]
         moments = cv2.moments(contour)
@@ -722,13 +732,21 @@ def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], 
                 found.append((circularity * vivid, centroid, math.sqrt(area / math.pi)))
                 if circularity >= 0.85:
                     continue  # a disc: its centroid is the better guess
+        inscribed.append((vivid, blob, x, y, area))
+    min_peak = 0.5 * min_radius_px / scale
+    inscribed.sort(key=lambda b: -b[0])
+    for vivid, blob, x, y, area in inscribed:
+        if limit is not None and len(found) >= limit:
+            found.sort(key=lambda c: -c[0])
+            if 0.6 * vivid <= found[limit - 1][0]:  # 0.6 vivid: the most a disc scores
+                break  # neither this blob's disc nor a later one's can be among the best
         distance = cv2.distanceTransform(blob, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         _, peak, _, (pu, pv) = cv2.minMaxLoc(distance)
         if min_peak <= peak <= params.max_radius_px / scale:
             found.append(((0.5 * min(1.0, math.pi * peak * peak / area) + 0.1) * vivid,
                           np.array([pu + x - 1.0, pv + y - 1.0]), peak + 0.5))
     found.sort(key=lambda c: -c[0])
-    return found
+    return found if limit is None else found[:limit]
 
 
 def _threshold(bgr: npt.NDArray[np.uint8], params: DetectorParams) -> npt.NDArray[np.uint8]:
@@ -767,7 +785,9 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     if params.opening_px > 1 and params.min_radius_px / s >= params.opening_px:
         kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
-    candidates = _candidates(mask, hsv[:, :, 1], s, params.min_radius_px, params)
+    # tracking tries the candidates by distance: all of them
+    candidates = _candidates(mask, hsv[:, :, 1], s, params.min_radius_px, params,
+                             limit=None if near is not None else params.max_candidates)
     # pixel i of the decimated image covers image pixels s i .. s i + s - 1
     guesses = [(np.array([u0, v0]) + s * centre + 0.5 * (s - 1), s * radius)
                for _, centre, radius in candidates]

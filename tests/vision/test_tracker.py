@@ -1,6 +1,7 @@
 """inflarm_vision.tracker: sub-pixel accuracy on exact renders, no false positives in clutter,
 robustness to exposure, the tracking mode and its fall-back, input validation."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -112,3 +113,25 @@ def test_region_search_and_validation():
         DetectorParams(min_confidence=1.5)
     with pytest.raises(ValueError, match='search_radii'):
         BallTracker(search_radii=0.5)
+
+
+def test_the_whole_frame_search_keeps_the_best_candidates_it_would_rank_without_pruning():
+    # detect_ball skips the inscribed discs of blobs that cannot rank among the
+    # max_candidates best: the candidates it keeps must be those of the full ranking
+    from inflarm_vision import tracker
+
+    params = DetectorParams()
+    compared = 0
+    for seed in range(20):
+        camera = SyntheticCamera(CAMERA, scene=Scene(background='clutter', clutter_count=40),
+                                 seed=seed)
+        hsv = cv2.cvtColor(camera.render(None).image, cv2.COLOR_BGR2HSV)
+        mask = cv2.inRange(hsv, params.hsv_lower, params.hsv_upper)
+        ranked = tracker._candidates(mask, hsv[:, :, 1], 1.0, params.min_radius_px, params)
+        for limit in (1, 2, 4):
+            best = tracker._candidates(mask, hsv[:, :, 1], 1.0, params.min_radius_px, params,
+                                       limit=limit)
+            assert [(score, tuple(centre)) for score, centre, _ in best] == \
+                [(score, tuple(centre)) for score, centre, _ in ranked[:limit]]
+            compared += len(ranked) > limit
+    assert compared >= 30  # most frames have more blobs than the limit
