@@ -101,9 +101,9 @@ def rows(m: dict) -> list[Row]:
         Row('SafetySupervisor cycle (on_state + output)', m['cycle'] * 1e6, 'us',
             'the 100 Hz cycle period', CYCLE_S * 1e6),
         Row('link load, host -> MCU', m['tx'], 'B/s', f'{BAUD} baud, 8N1', m['line'],
-            note='100 Hz motor + valve commands'),
+            note='100 Hz motor + valve commands, 10 Hz HEARTBEAT'),
         Row('link load, MCU -> host', m['rx'], 'B/s', f'{BAUD} baud, 8N1', m['line'],
-            note='50 Hz STATE'),
+            note='50 Hz STATE, 10 Hz HEARTBEAT_ACK'),
     ]
 
 

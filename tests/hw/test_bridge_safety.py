@@ -175,6 +175,32 @@ def test_inactive_means_safe_and_zero_torque_is_a_choice():
     assert bench.sup.status('inactive', 'connected').motors == 'zero_torque'
 
 
+@pytest.mark.parametrize('safe_motors, mode', [('hold', MotorMode.HOLD),
+                                                ('zero_torque', MotorMode.OFF)])
+def test_motor_fields_the_mode_does_not_use_are_what_the_spec_says(safe_motors, mode):
+    # inflarm_hw/README.md, MOTOR_COMMAND: HOLD and OFF carry the measured positions
+    # (information only), velocity and torque 0; POSITION no torque
+    bench = Bench(safe_motors=safe_motors, max_velocity=0.5)
+    out = bench.tick()  # no command yet: safe, while the motors are measured at Q0
+    assert out.motor_mode == mode
+    np.testing.assert_allclose(out.motor_position, Q0)
+    for values in (out.motor_velocity, out.motor_torque):
+        np.testing.assert_array_equal(values, 0.0)
+    # POSITION: feed-forward as commanded (clamped), the slew rate where the slew limits
+    bench.sup.on_motor_command(['joint_1', 'joint_2', 'joint_3'], [0.0, 0.6, -0.7],
+                               [0.2, 0.0, -0.9], bench.now)
+    out = bench.tick(0.01)
+    assert out.motor_mode == MotorMode.POSITION
+    np.testing.assert_allclose(out.motor_position, [0.0, 0.6, -1.195])
+    np.testing.assert_allclose(out.motor_velocity, [0.2, 0.0, 0.5])
+    np.testing.assert_array_equal(out.motor_torque, 0.0)
+    bench.sup.on_link_lost('no valid frame for 300 ms', bench.now)
+    out = bench.tick()
+    assert out.motor_mode == mode
+    np.testing.assert_allclose(out.motor_position, Q0)
+    np.testing.assert_array_equal(out.motor_velocity, 0.0)
+
+
 def test_over_pressure_vents_and_latches_until_reset():
     bench = Bench()
     bench.command(B2=40e3)

@@ -5,6 +5,7 @@ command types, FAULT channel and value per code, the rate limit, a HELLO of anot
 The core (`SimMcu.receive` and `SimMcu.step`) with the time given, so every window is exact."""
 
 import math
+import pathlib
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from inflarm_hw.mcu_protocol import (
     FaultKind,
     FrameDecoder,
     Heartbeat,
+    HeartbeatAck,
     Hello,
     HelloAck,
     MessageType,
@@ -166,7 +168,7 @@ def test_an_invalid_command_is_ignored_reported_per_frame_type_and_rate_limited(
 def test_fields_a_mode_does_not_use_are_ignored():
     host = Host()
     host.send(Hello(watchdog_ms=250))
-    # HOLD with whatever in position (the bridge sends the measured positions), TORQUE unused
+    # HOLD with whatever in its fields (the bridge sends 0), TORQUE unused
     hold = MotorCommand(MotorMode.HOLD, (math.nan, 5.0, -5.0), (math.inf,) * 3, (math.nan,) * 3)
     assert messages(host.send(hold), Fault) == []
     held = host.mcu.arm.target.copy()
@@ -254,3 +256,57 @@ def test_channels_the_mcu_lacks_are_ignored_but_every_voltage_must_be_finite():
     assert (fault.code, fault.channel) == (FaultCode.COMMAND_INVALID, MessageType.VALVE_COMMAND)
     np.testing.assert_array_equal(host.mcu.chamber_voltage, 1.0)
     assert messages(host.step(), State)[-1].link_pressure == (0.0, 0.0)
+
+
+HELLO_WIRE = '00 02 01 02 07 02 01 02 fa 05 1d 81 62 e2 00'  # with the bridge's leading 00
+HELLO_ACK_WIRE = '02 02 01 01 02 01 02 01 02 fa 04 03 05 02 05 32 e3 fc 81 00'
+HEARTBEAT_WIRE = '02 03 02 08 09 04 03 02 01 fd 21 eb cf 00'
+HEARTBEAT_ACK_WIRE = '02 04 02 01 09 04 03 02 01 2c 79 21 e2 00'
+
+
+def test_the_readme_handshake_and_heartbeat_bytes():
+    readme = (pathlib.Path(__file__).resolve().parents[2] / 'inflarm_hw' / 'README.md'
+              ).read_text()
+    text = ' '.join(readme.split())
+    for wire in (HELLO_WIRE, HELLO_ACK_WIRE, HEARTBEAT_WIRE, HEARTBEAT_ACK_WIRE):
+        assert f'`{wire}`' in text
+    assert bytes.fromhex(HELLO_WIRE) == b'\x00' + encode_frame(Hello(1, 250), 7)
+    assert bytes.fromhex(HEARTBEAT_WIRE) == encode_frame(Heartbeat(0x01020304), 8)
+    mcu = Host().mcu
+    assert mcu.receive(bytes.fromhex(HELLO_WIRE), 10.0) == bytes.fromhex(HELLO_ACK_WIRE)
+    assert mcu.receive(bytes.fromhex(HEARTBEAT_WIRE), 10.001) == bytes.fromhex(
+        HEARTBEAT_ACK_WIRE)
+    # a heartbeat outside a session is answered too
+    assert messages(Host().send(Heartbeat(5)), HeartbeatAck) == [HeartbeatAck(5)]
+
+
+def test_a_reconnect_after_silence_starts_a_fresh_safe_session():
+    host = Host()
+    host.send(Hello(watchdog_ms=100))
+    host.send(valves(), position())
+    host.step()
+    frames = host.step(0.2)  # the host goes silent: the watchdog trips, STATE goes on
+    assert [f.code for f in messages(frames, Fault)] == [FaultCode.WATCHDOG]
+    assert len(messages(frames, State)) == 10
+    assert messages(frames, State)[-1].status == StatusFlag.SESSION | StatusFlag.WATCHDOG
+    # a half frame on the line (counted in the old session), then the bridge's 00 + HELLO
+    half = encode_frame(valves(), host.seq)[:20]
+    host.seq += 1
+    host.decoder.feed(host.mcu.receive(half, host.now))
+    assert messages(host.step(), State)[-1].rx_errors == 0  # still waiting for its end
+    host.decoder.feed(host.mcu.receive(b'\x00', host.now))
+    assert messages(host.step(), State)[-1].rx_errors == 1
+    host.decoder.feed(host.mcu.receive(half, host.now))
+    hello_seq = host.seq
+    frames = host.decoder.feed(host.mcu.receive(
+        b'\x00' + encode_frame(Hello(watchdog_ms=100), hello_seq), host.now))
+    host.seq += 1
+    assert [(f.seq, type(f.message)) for f in frames] == [(0, HelloAck)]
+    state = messages(host.step(), State)[-1]
+    assert (state.rx_errors, state.rx_lost, state.command_seq) == (0, 0, hello_seq)
+    assert state.status == StatusFlag.SESSION | StatusFlag.WATCHDOG
+    np.testing.assert_array_equal(host.mcu.chamber_voltage, 0.0)
+    assert host.mcu.motor_mode == MotorMode.HOLD
+    host.send(valves())
+    state = messages(host.step(), State)[-1]
+    assert state.command_seq == host.seq - 1 and state.status == StatusFlag.SESSION
