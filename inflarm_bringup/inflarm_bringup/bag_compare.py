@@ -151,8 +151,9 @@ class Tolerances:
         return Tolerances(values)
 
 
-#: The defaults: what a replay of a simulated run on a loaded machine stays within
-#: (``inflarm_bringup/README.md``), far below what a changed parameter moves.
+#: The defaults: absolute tolerances per quantity, overridden per topic where a topic needs its
+#: own, set between the replay-to-replay differences of a recorded run and what a changed
+#: parameter moves (``inflarm_bringup/README.md`` has the figures).
 DEFAULT_TOLERANCES = Tolerances({
     'position': 1e-4, 'velocity': 1e-3, 'force': 1e-3, 'torque': 1e-3, 'pressure': 100.0,
     'time': 0.25, 'ratio': 1e-4, 'unmatched': 0.05,
@@ -163,9 +164,8 @@ DEFAULT_TOLERANCES = Tolerances({
     '/trial_report:position': 1e-3,
     # elastostatic_ik plans a whole path from one load estimate, the latest when the path
     # arrives; which one is latest is a sub-millisecond ordering the record cannot fix, and
-    # one estimate's sample-to-sample noise moves the plan by ~2e-4 rad. 1e-3 rad is 0.6 mm
-    # at the tip of a 0.6 m link; a 10 % stiffer IK model moves it by 6.8e-3 rad (measured,
-    # inflarm_bringup.bag_regression).
+    # one estimate's sample-to-sample noise moves the plan. 1e-3 rad (0.6 mm at the tip of a
+    # 0.6 m link) is above that and below what a 10 % stiffer IK model moves it by (README).
     '/motor_position_command:position': 1e-3,
     # The load estimator's 10 Hz link status publishes only when a new estimate arrived since
     # its last firing: whether a firing publishes is the same ordering ambiguity. Its messages

@@ -38,7 +38,7 @@ from inflarm_hw.bag import bag_info, deserialize, normalize_topic, read_messages
 from inflarm_model.kinematics import FlexibleArm
 from inflarm_model.link import MEAN_STIFFNESS
 from inflarm_model.urdf import DEFAULT_LINK_LENGTH, DEFAULT_SPRING_OFFSET
-from inflarm_msgs_json.cli import positive_float
+from inflarm_msgs_json.cli import positive_float, run_command
 
 PROG = 'inflarm-estimate-bag'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
@@ -119,30 +119,24 @@ def write_estimates_csv(path: str, times: np.ndarray, estimates) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; returns the exit status (0 ok, 1 bad bag or no samples, 2 bad arguments)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse exits on --help and usage errors
-        return int(exc.code) if isinstance(exc.code, int) else 2
+    return run_command(build_parser(), argv, _estimate, errors=(OSError, ValueError),
+                       error_status=1)
+
+
+def _estimate(args: argparse.Namespace) -> int:
     if len(args.stiffness) not in (1, 4):
-        parser.print_usage(sys.stderr)
-        print(f'{PROG}: error: --stiffness takes 1 or 4 values, got {len(args.stiffness)}',
-              file=sys.stderr)
-        return 2
+        raise argparse.ArgumentError(
+            None, f'--stiffness takes 1 or 4 values, got {len(args.stiffness)}')
     stiffness = args.stiffness[0] if len(args.stiffness) == 1 else args.stiffness
-    try:
-        arm = FlexibleArm(args.link_length, args.spring_offset)
-        times, q_m, tau_m, skipped = read_motor_samples(args.bag, args.topic)
-        if len(times) == 0:
-            raise ValueError(f'no {args.topic} sample with positions and efforts of '
-                             f'{list(FlexibleArm.MOTOR_JOINT_NAMES)} in {args.bag} '
-                             f'({skipped} skipped)')
-        tracker = LoadTracker(arm, stiffness)
-        estimates = [tracker.update(q, tau) for q, tau in zip(q_m, tau_m, strict=True)]
-        write_estimates_csv(args.out, times, estimates)
-    except (OSError, ValueError) as exc:
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return 1
+    arm = FlexibleArm(args.link_length, args.spring_offset)
+    times, q_m, tau_m, skipped = read_motor_samples(args.bag, args.topic)
+    if len(times) == 0:
+        raise ValueError(f'no {args.topic} sample with positions and efforts of '
+                         f'{list(FlexibleArm.MOTOR_JOINT_NAMES)} in {args.bag} '
+                         f'({skipped} skipped)')
+    tracker = LoadTracker(arm, stiffness)
+    estimates = [tracker.update(q, tau) for q, tau in zip(q_m, tau_m, strict=True)]
+    write_estimates_csv(args.out, times, estimates)
     forces = [e.force for e in estimates if e.converged]
     converged = len(forces)
     mean = np.mean(forces, axis=0) if converged else np.full(3, math.nan)

@@ -61,24 +61,21 @@ load estimator's estimates carry their joint_states sample's), the input reaches
 before the first such output was recorded (never before its own record time: `retime_inputs`).
 Such an input whose output was recorded less than ``RECORD_ORDER_NS`` (1 ms) before one of the
 node's record-time firings is ambiguous: a recorder takes in messages of different topics
-in its own order, and the firing may have come first (measured: 10 of 12 such estimates
-published after the link status recorded just after them, in one run; 4 of 4 before, in
-another). The replay (``order='after'``) puts it after the firing; ``order='before'`` puts
+in its own order, and the firing may have come first (either order occurs: the README has the
+counts). The replay (``order='after'``) puts it after the firing; ``order='before'`` puts
 every ambiguous input before its firing; the command runs both and a recorded timer output
 matches when within tolerance of either. Unstamped inputs (``control_task``) go at their
 record time, and in the ``order='before'`` replay to the other side of a due time of their
 node's timers less than ``UNSTAMPED_ORDER_NS`` (2 ms) from it: there is nothing to tell their
-order by (measured: a task recorded 0.07 ms before the first trial step had been taken in
-before it; one recorded 1.5 ms before a firing that published nothing, after it). Such a
-firing is on the grid worked back from the node's first output, so its due time is itself
-uncertain by the timer's jitter (a few ms on a loaded machine); the window does not cover
-that.
+order by. Such a firing is on the grid worked back from the node's first output, so its due
+time is itself uncertain by the timer's jitter (a few ms on a loaded machine); the window does
+not cover that.
 
 Start-up: the first ``--skip-start-s`` (default 1.0 s) after each node's first recorded output
-is not compared (as ``ros2 bag play --start-offset`` skips): measured, the estimator's first
-estimates lag up to 0.5 s behind their samples for about 0.1 s, and the recorder's copies of
-them lag behind the link status the node published after them. From the bag's first message
-would not do: the nodes' first outputs come 2-5 s into the recorded runs.
+is not compared (as ``ros2 bag play --start-offset`` skips): a node's first outputs lag
+behind their inputs, and the recorder's first copies of a topic lag behind what the node
+published after them (the README has the figures). It counts from each node's first output,
+not from the bag's first message, because the nodes start publishing well into a recording.
 
 Ordering ambiguity that stays: a replayed message of a timer output out of tolerance in both
 orders is counted as unmatched, and a topic passes with up to 5 % unmatched (``unmatched``),
@@ -90,9 +87,9 @@ node (out of tolerance on most messages) does. ``trial_report``'s RMSE has a tol
 - ``motor_position_command``: ``elastostatic_ik`` plans a whole tip trajectory from one load
   estimate, the latest when the path arrives; which one is latest is a sub-millisecond
   ordering the record cannot fix, and one estimate's sample-to-sample noise moves every
-  command of the path by ~2e-4 rad. Its joint positions have a tolerance of 1e-3 rad (0.6 mm
-  at the tip of a 0.6 m link); a 10 % stiffer IK model moves them by 6.8e-3 rad (measured on
-  three recordings; x 0.9 makes the test path unreachable and the IK rejects it).
+  command of the path. Its joint positions have a tolerance of 1e-3 rad (0.6 mm at the tip
+  of a 0.6 m link), above that noise and below what a 10 % stiffer IK model moves them by
+  (the README has both figures; the tests check that the stiffer model fails).
 - ``link_status``: the estimator's 10 Hz firing publishes only when a new estimate arrived
   since the last one, so whether a firing publishes is that ordering too. Its messages are
   matched to the nearest recorded one of the same link within one period (0.1 s), the matched
@@ -128,6 +125,7 @@ from inflarm_bringup.bag_compare import (
     stamp_ns,
 )
 from inflarm_hw.bag import BagMessage, BagWriter, bag_info, deserialize, read_messages
+from inflarm_msgs_json.cli import run_command
 
 __all__ = [
     'INFRASTRUCTURE_TOPICS',
@@ -165,15 +163,12 @@ INFRASTRUCTURE_TOPICS = frozenset({'/clock', '/parameter_events', '/rosout'})
 NOT_COMPARED = frozenset({'/diagnostics'})
 #: An input due at a node less than this before one of its timer firings aligned to record
 #: times [ns] goes to it after the firing: a recorder takes in the messages of different
-#: topics that are ready together in its own order (measured here: inputs recorded 0.06-0.2 ms
-#: before an output the node had published before taking them in; 3 ms and more before one it
-#: published after).
+#: topics that are ready together in its own order (the README has the offsets measured).
 RECORD_ORDER_NS = 1_000_000
 #: An unstamped input (``control_task``) recorded less than this from a due time of a timer of
 #: the node that takes it [ns] goes to the other side of that firing in the other-order replay
-#: (``order='before'``): record-time order across topics is not reliable below it (measured:
-#: 0.06-1.5 ms between an input and a firing the node had in the other order), and a firing
-#: that published nothing is only on the grid worked back from the node's next output.
+#: (``order='before'``): record-time order across topics is not reliable below it, and a
+#: firing that published nothing is only on the grid worked back from the node's next output.
 UNSTAMPED_ORDER_NS = 2_000_000
 #: The start-up not compared by default [s]: from each node's first recorded output.
 SKIP_START_S = 1.0
@@ -381,7 +376,7 @@ def firings_of(times_ns: Sequence[int], period_ns: int, by: str) -> list[int]:
     each distinct stamp is one firing (one firing may publish several messages with its
     stamp; a firing the machine delayed and the next one, on time, may be a few ms apart and
     both count). ``by='time'``: record times; the messages within a tenth of a period of a
-    group's first are one firing (measured: one firing's messages are recorded within 1 ms).
+    group's first are one firing.
     """
     if period_ns <= 0:
         raise ValueError(f'expected period_ns > 0, got {period_ns!r}')
@@ -494,8 +489,8 @@ def retime_inputs(inputs: Sequence[BagMessage], subscribers: Mapping[str, Sequen
         Node -> increasing times [ns] its timers fire at, aligned to record times.
     order : {'after', 'before'}
         Where an input goes that is ambiguous, its node's output recorded less than
-        `RECORD_ORDER_NS` from one of the node's firings: ``'after'`` (the default, what
-        was measured most often) that firing when recorded just before it, ``'before'`` it
+        `RECORD_ORDER_NS` from one of the node's firings: ``'after'`` (the default)
+        that firing when recorded just before it, ``'before'`` it
         when recorded just before or just after it (the other order, `regression`); with
         ``'before'``, an unstamped input near a firing also goes to its other side.
 
@@ -660,9 +655,7 @@ def start_times(bag: str | os.PathLike, nodes: Sequence[NodeIo],
                 skip_start_s: float = SKIP_START_S) -> dict[str, int]:
     """Output topic -> when its comparison starts [ns]: ``skip_start_s`` after the first
     output of its node recorded in ``bag`` (a node's first callbacks and the recorder's first
-    messages of a topic lag behind: measured here, the estimator's first estimates up to
-    0.5 s behind their samples for 0.1 s, and the recorder's copies of them 40 ms behind the
-    link status it published after them).
+    messages of a topic lag behind).
 
     Raises
     ------
@@ -750,31 +743,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; returns the exit status (0 within tolerance, 1 not, 2 bad arguments)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse exits on --help and usage errors
-        return int(exc.code) if isinstance(exc.code, int) else 2
-    try:
-        tolerances = DEFAULT_TOLERANCES.updated(args.tolerance)
-        nodes = None
-        if args.nodes is not None:
-            nodes = [n.strip() for n in args.nodes.split(',') if n.strip()]
-            if not nodes or any(n not in NODES for n in nodes):
-                raise ValueError(f'--nodes: expected names of {list(NODES)}, got '
-                                 f'{args.nodes!r}')
-        out = pathlib.Path(args.out) if args.out else None
-        if out is not None and (out / 'replayed').exists():
-            raise ValueError(f"--out: {str(out / 'replayed')!r} exists: a bag is never "
-                             'written over')
-        if not (np.isfinite(args.skip_start_s) and args.skip_start_s >= 0):
-            raise ValueError(f'--skip-start-s: expected a number >= 0 [s], got '
-                             f'{args.skip_start_s!r}')
-        result = replay(args.bag, nodes, args.params_file)
-        other = replay(args.bag, nodes, args.params_file, order='before')
-    except ValueError as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
+    return run_command(build_parser(), argv, _compare, errors=(ValueError,), error_status=2)
+
+
+def _compare(args: argparse.Namespace) -> int:
+    tolerances = DEFAULT_TOLERANCES.updated(args.tolerance)
+    nodes = None
+    if args.nodes is not None:
+        nodes = [n.strip() for n in args.nodes.split(',') if n.strip()]
+        if not nodes or any(n not in NODES for n in nodes):
+            raise ValueError(f'--nodes: expected names of {list(NODES)}, got {args.nodes!r}')
+    out = pathlib.Path(args.out) if args.out else None
+    if out is not None and (out / 'replayed').exists():
+        raise ValueError(f"--out: {str(out / 'replayed')!r} exists: a bag is never "
+                         'written over')
+    if not (np.isfinite(args.skip_start_s) and args.skip_start_s >= 0):
+        raise ValueError(f'--skip-start-s: expected a number >= 0 [s], got '
+                         f'{args.skip_start_s!r}')
+    result = replay(args.bag, nodes, args.params_file)
+    other = replay(args.bag, nodes, args.params_file, order='before')
     report = regression(args.bag, result, tolerances, args.skip_start_s, other)
     print(f'{PROG}: {args.bag}\n{describe(result)}\n')
     print(report.table())

@@ -45,7 +45,7 @@ from inflarm_hw.sra_identification import (
 from inflarm_hw.sra_plant import PLANT_PARAMETER_NAMES, SoftArmPlantParams
 from inflarm_model.soft_arm import CHAMBERS
 from inflarm_msgs_json import ChamberPressures, MessageError, PressureCommand, decode
-from inflarm_msgs_json.cli import positive_float
+from inflarm_msgs_json.cli import positive_float, run_command
 
 PROG = 'inflarm-identify-plant'
 STRING = 'std_msgs/msg/String'
@@ -205,11 +205,10 @@ def report(identification: PlantIdentification, initial: SoftArmPlantParams) -> 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; returns the exit status (0 ok, 1 no convergence or unwritable output,
     2 bad arguments or a bag that cannot be identified from)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse exits on --help and usage errors
-        return int(exc.code) if isinstance(exc.code, int) else 2
+    return run_command(build_parser(), argv, _identify)
+
+
+def _identify(args: argparse.Namespace) -> int:
     topics = {'command': normalize_topic(args.command_topic),
               'pressure': normalize_topic(args.pressure_topic),
               'position': normalize_topic(args.position_topic)}

@@ -23,8 +23,9 @@ Run ``inflarm-sra-experiments --out DIR`` to write into ``DIR``:
 - ``trajectories.csv``: time [s] and measured x, y, z [mm] of trials 1 and 30;
 - ``summary.md``: the set-up and the figures for trials 1, 10 and 30.
 
-The camera costs about 20 ms a frame: 30 trials of 30 s (4,530 frames) take about 1.5 min of
-CPU (4.4 min on a busy shared machine); ``--trials 3 --duration 6`` a few seconds.
+The camera renders and measures one frame per control step, so the default 30 trials of 30 s
+(4,530 frames) are the long run (``inflarm_control/README.md`` has its time) and
+``--trials 3 --duration 6`` a short one.
 Coordinates are in ``sra_mount`` (metres) in the core and converted to millimetres only here,
 at the edge, to match the paper's plots. Matplotlib (Agg) is imported only to draw.
 """

@@ -37,9 +37,7 @@ from inflarm_model.elastostatics import (
     MOTOR_INDICES,
     SPRING_INDICES,
     check_arm,
-    check_rows,
     check_stiffness,
-    check_vector,
     equilibrium_stiffness,
     link_moments,
     load_hessian,
@@ -51,6 +49,7 @@ from inflarm_model.link import (
     lowest_sufficient_pressure,
     min_pressure_for_moment,
 )
+from inflarm_model.validation import check_rows, check_vector
 
 __all__ = [
     'DEFAULT_MAX_CONDITION',

@@ -49,7 +49,7 @@ limit), with a round-trip error of at most 7.5 Pa.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import functools
 import hashlib
 import importlib.metadata
@@ -68,6 +68,7 @@ import numpy.typing as npt
 
 from inflarm_control.pid_ilc import PidIlcController, PidIlcParams, run_trials
 from inflarm_model.soft_arm import CHAMBERS
+from inflarm_model.validation import check_vector
 
 __all__ = [
     'DEFAULT_GRID',
@@ -121,8 +122,6 @@ class KnowledgeGrid:
     origin: tuple[float, float, float] = (-0.19, -0.19, 0.58)
     spacing: float = 0.01
     shape: tuple[int, int, int] = (40, 40, 42)
-    # Grid values per axis as plain floats, so single lookups need no numpy.
-    _values: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         origin = np.asarray(self.origin, dtype=float)
@@ -139,11 +138,6 @@ class KnowledgeGrid:
         object.__setattr__(self, 'origin', tuple(float(v) for v in origin))
         object.__setattr__(self, 'spacing', spacing)
         object.__setattr__(self, 'shape', tuple(int(n) for n in shape))
-        values = tuple(
-            tuple(round(o + i * spacing, 9) for i in range(n))
-            for o, n in zip(self.origin, self.shape, strict=True)
-        )
-        object.__setattr__(self, '_values', values)
 
     @property
     def size(self) -> int:
@@ -182,10 +176,10 @@ class KnowledgeGrid:
         ValueError
             If the shape is wrong, a value is not finite or a point is outside the grid.
         """
-        if _is_single_point(point):
-            return self._flat_index(*_coerce_point(point))[0]
-        ijk = self._ijk_of(_coerce_points(point, 'point'))
-        return np.ravel_multi_index(tuple(ijk.T), self.shape).astype(np.int64)
+        points = _coerce_points(point, 'point')
+        ijk = self._ijk_of(points.reshape(-1, 3))
+        index = np.ravel_multi_index(tuple(ijk.T), self.shape).astype(np.int64)
+        return int(index[0]) if points.ndim == 1 else index
 
     def point_of(self, index: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """
@@ -224,20 +218,7 @@ class KnowledgeGrid:
         ndarray, shape (3,) or (N, 3)
             Grid positions [m, sra_mount].
         """
-        if _is_single_point(point):
-            return np.array(self._flat_index(*_coerce_point(point))[1:])
         return self.point_of(self.index_of(point))
-
-    def _flat_index(self, x: float, y: float, z: float) -> tuple[int, float, float, float]:
-        # Plain-float arithmetic: numpy per-call overhead would dominate a single lookup.
-        (ox, oy, oz), s, (nx, ny, nz) = self.origin, self.spacing, self.shape
-        ix = math.floor((x - ox) / s + _HALF)
-        iy = math.floor((y - oy) / s + _HALF)
-        iz = math.floor((z - oz) / s + _HALF)
-        if not (0 <= ix < nx and 0 <= iy < ny and 0 <= iz < nz):
-            self._raise_outside(np.array([[x, y, z]]))
-        xs, ys, zs = self._values
-        return (ix * ny + iy) * nz + iz, xs[ix], ys[iy], zs[iz]
 
     def _ijk_of(self, points: npt.NDArray[np.float64]) -> npt.NDArray[np.int64]:
         ijk = np.floor((points - np.asarray(self.origin)) / self.spacing + _HALF).astype(np.int64)
@@ -511,12 +492,15 @@ class KnowledgeDatabase:
         KeyError
             If the nearest knowledge point holds no memory yet.
         """
-        if self._maps is None:
-            self._check_open()
-        idx, gx, gy, gz = self.grid._flat_index(*_coerce_point(point))
+        self._check_open()
+        if np.ndim(point) != 1:
+            raise ValueError(f'expected point of shape (3,) [m], got shape {np.shape(point)}')
+        idx = self.grid.index_of(point)
+        grid_point = self.grid.point_of(idx)
         if not self._mask[idx]:
-            raise KeyError(f'knowledge point {(gx, gy, gz)} (index {idx}) holds no memory')
-        return np.array((gx, gy, gz)), decode_pressure(self._data[idx], self.scale)
+            raise KeyError(f'knowledge point {tuple(grid_point.tolist())} (index {idx}) holds '
+                           'no memory')
+        return grid_point, decode_pressure(self._data[idx], self.scale)
 
     def read(self, index: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """
@@ -622,7 +606,7 @@ def seed_memory(db: KnowledgeDatabase, target: npt.ArrayLike) -> npt.NDArray[np.
     """
     if not isinstance(db, KnowledgeDatabase):
         raise ValueError(f'expected db to be a KnowledgeDatabase, got {type(db).__name__}')
-    if _is_single_point(target):
+    if np.ndim(target) == 1:
         return db.lookup(target)[1]
     return db.read(db.grid.index_of(target))
 
@@ -928,7 +912,7 @@ def build_knowledge_database(
     for name, value in (('n_trials', n_trials), ('batch_size', batch_size), ('workers', workers)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
             raise ValueError(f'expected {name} to be an int >= 1, got {value!r}')
-    start = _coerce_point(start)
+    start = tuple(check_vector('start', start, 3, 'm').tolist())
     params = PidIlcParams() if controller_params is None else controller_params
     if not isinstance(params, PidIlcParams):
         raise ValueError(
@@ -1067,38 +1051,10 @@ def _load_array(path: Path, mode: str, dtype: np.dtype, shape: tuple[int, ...]) 
     return array
 
 
-def _is_single_point(point: npt.ArrayLike) -> bool:
-    # Cheap checks first: np.ndim converts a tuple to an array (~1 us).
-    if isinstance(point, np.ndarray):
-        return point.ndim == 1
-    if isinstance(point, tuple | list) and point:
-        return not isinstance(point[0], tuple | list | np.ndarray)
-    return np.ndim(point) == 1
-
-
-def _coerce_point(point: npt.ArrayLike) -> tuple[float, float, float]:
-    # Fast path for tuples, lists and (3,) arrays; everything else goes through numpy.
-    if isinstance(point, np.ndarray):
-        point = point.tolist() if point.shape == (3,) else point
-    if isinstance(point, tuple | list) and len(point) == 3:
-        try:
-            x, y, z = point
-            x, y, z = float(x), float(y), float(z)
-        except (TypeError, ValueError):
-            pass
-        else:
-            if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
-                return x, y, z
-            raise ValueError(f'expected point of 3 finite values [m], got {point!r}')
-    arr = np.asarray(point, dtype=float)
-    if arr.shape != (3,):
-        raise ValueError(f'expected point of shape (3,) [m], got shape {arr.shape}')
-    return _coerce_point(arr.tolist())
-
-
 def _coerce_points(points: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
+    # One point, shape (3,), or N of them, shape (N, 3).
     arr = np.asarray(points, dtype=float)
-    if arr.ndim != 2 or arr.shape[1] != 3:
+    if arr.shape != (3,) and (arr.ndim != 2 or arr.shape[1] != 3):
         raise ValueError(f'expected {name} of shape (3,) or (N, 3) [m], got shape {arr.shape}')
     if not np.all(np.isfinite(arr)):
         raise ValueError(f'expected finite {name} [m], got NaN or inf')

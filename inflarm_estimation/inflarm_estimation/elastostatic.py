@@ -46,10 +46,8 @@ from inflarm_model.elastostatics import (
     MOTOR_INDICES,
     SPRING_INDICES,
     check_arm,
-    check_rows,
     check_solver_options,
     check_stiffness,
-    check_vector,
     conditioning,
     conditioning_sample,
     link_moments,
@@ -58,6 +56,7 @@ from inflarm_model.elastostatics import (
     solve_load_newton,
 )
 from inflarm_model.link import wrinkling_moment
+from inflarm_model.validation import check_rows, check_vector
 
 __all__ = [
     'DEFAULT_MAX_CONDITION',

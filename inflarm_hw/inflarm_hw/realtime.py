@@ -2,10 +2,9 @@
 
 A simulator node steps its plant from a timer. Stepping by the timer's nominal period lets
 simulated time fall behind whenever a callback runs late, e.g. behind a camera frame being
-rendered in the same thread (10-20 ms at 640 x 480, more on a busy machine): measured here,
-``sra_sim`` with its camera on simulated 9.2 s in 10 s. The controller's clock does not slow
-down with it, so the arm appears slower than it is. `ElapsedSteps` gives the time that really
-passed instead.
+rendered in the same thread (``inflarm_hw/README.md`` has the figure for ``sra_sim``). The
+controller's clock does not slow down with it, so the arm appears slower than it is.
+`ElapsedSteps` gives the time that really passed instead.
 """
 
 from collections.abc import Callable

@@ -32,6 +32,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from inflarm_model.validation import check_batch
+
 __all__ = [
     'DISTORTION_MODELS',
     'PinholeCamera',
@@ -54,15 +56,6 @@ DISTORTION_MODELS = {'plumb_bob': 5, 'rational_polynomial': 8}
 # Undistortion is an iterative inversion in OpenCV; its default (5 iterations) leaves errors of
 # 1e-3 px at the edge of a moderately distorted image. These criteria make it exact to 1e-9 px.
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-13)
-
-
-def _check_points(points: npt.ArrayLike, name: str, dim: int) -> npt.NDArray[np.float64]:
-    p = np.asarray(points, dtype=float)
-    if p.ndim == 0 or p.shape[-1] != dim:
-        raise ValueError(f'expected {name} of shape ({dim},) or (..., {dim}), got {p.shape}')
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f'expected finite {name}')
-    return p
 
 
 @dataclass(frozen=True)
@@ -173,7 +166,7 @@ def project_points(camera: PinholeCamera, points: npt.ArrayLike) -> npt.NDArray[
     pixels : ndarray, shape (2,) or (..., 2)
         ``(u, v)`` [px] (``cv2.projectPoints``).
     """
-    p = _check_points(points, 'points', 3)
+    p = check_batch('points', points, 3, 'm', single=True)
     if np.any(p[..., 2] <= 0.0):
         raise ValueError('expected points in front of the camera (z > 0)')
     flat = p.reshape(-1, 3)
@@ -195,7 +188,7 @@ def undistort_pixels(camera: PinholeCamera, pixels: npt.ArrayLike) -> npt.NDArra
     normalized : ndarray, shape (2,) or (..., 2)
         The inverse of `project_points` (``cv2.undistortPoints``, iterated to convergence).
     """
-    p = _check_points(pixels, 'pixels', 2)
+    p = check_batch('pixels', pixels, 2, 'px', single=True)
     flat = p.reshape(-1, 1, 2)
     normalized = cv2.undistortPoints(flat, camera.k, camera.d, None, None, None,
                                      _UNDISTORT_CRITERIA)
@@ -273,7 +266,7 @@ class RigidTransform:
 
     def apply(self, points: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Map points, shape (3,) or (..., 3) [m], from frame ``a`` to frame ``b``."""
-        p = _check_points(points, 'points', 3)
+        p = check_batch('points', points, 3, 'm', single=True)
         return p @ self.rotation.T + self.translation
 
     def inverse(self) -> 'RigidTransform':
@@ -303,9 +296,9 @@ def look_at(eye: npt.ArrayLike, target: npt.ArrayLike,
     -------
     camera2frame : RigidTransform
     """
-    eye = _check_points(eye, 'eye', 3).reshape(3)
-    target = _check_points(target, 'target', 3).reshape(3)
-    up = _check_points(up, 'up', 3).reshape(3)
+    eye = check_batch('eye', eye, 3, 'm', single=True).reshape(3)
+    target = check_batch('target', target, 3, 'm', single=True).reshape(3)
+    up = check_batch('up', up, 3, single=True).reshape(3)
     z = target - eye
     if np.linalg.norm(z) < 1e-9:
         raise ValueError('expected target different from eye')
@@ -336,7 +329,7 @@ def cone_rays(center: npt.ArrayLike, radius: float, n: int) -> npt.NDArray[np.fl
         ``cos(a) c + sin(a) (cos(phi) e1 + sin(phi) e2)`` with ``c`` the unit axis, ``e1, e2``
         orthonormal to it and ``sin(a) = radius / |center|``.
     """
-    c = _check_points(center, 'center', 3).reshape(3)
+    c = check_batch('center', center, 3, 'm', single=True).reshape(3)
     distance = float(np.linalg.norm(c))
     if not (np.isfinite(radius) and 0.0 < radius < distance):
         raise ValueError(f'expected 0 < radius < |center| = {distance:.6g} m, got {radius}')

@@ -31,7 +31,7 @@ from inflarm_model.characterization import (
     write_samples_csv,
 )
 from inflarm_model.link import LINK_RADIUS
-from inflarm_msgs_json.cli import positive_float
+from inflarm_msgs_json.cli import positive_float, run_command
 
 PROG = 'inflarm-characterize'
 DEFAULT_SEED = 7
@@ -63,33 +63,27 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; returns the exit status (0 ok, 1 bad input file, 2 bad arguments)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse exits on --help and usage errors
-        return int(exc.code) if isinstance(exc.code, int) else 2
+    return run_command(build_parser(), argv, _characterize, errors=(OSError, ValueError),
+                       error_status=1)
+
+
+def _characterize(args: argparse.Namespace) -> int:
     if args.seed is not None and not args.synthetic:
-        parser.print_usage(sys.stderr)
-        print(f'{PROG}: error: --seed needs --synthetic', file=sys.stderr)
-        return 2
-    try:
-        if args.synthetic:
-            if os.path.exists(args.samples):
-                raise FileExistsError(f'{args.samples} exists; --synthetic will not overwrite it')
-            seed = DEFAULT_SEED if args.seed is None else args.seed
-            write_samples_csv(args.samples, synthetic_samples(np.random.default_rng(seed)))
-        samples = read_samples_csv(args.samples)
-        fits = characterize(samples, radius=args.radius, pressure_step=args.pressure_step)
-        os.makedirs(args.out, exist_ok=True)
-        with open(os.path.join(args.out, 'table3.csv'), 'w', encoding='utf-8') as handle:
-            handle.write(table3_csv(fits))
-        with open(os.path.join(args.out, 'table3.md'), 'w', encoding='utf-8') as handle:
-            handle.write(table3_markdown(fits))
-        plot_characteristic(samples, fits, os.path.join(args.out, 'fig9.png'),
-                            pressure_step=args.pressure_step)
-    except (OSError, ValueError) as exc:
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return 1
+        raise argparse.ArgumentError(None, '--seed needs --synthetic')
+    if args.synthetic:
+        if os.path.exists(args.samples):
+            raise FileExistsError(f'{args.samples} exists; --synthetic will not overwrite it')
+        seed = DEFAULT_SEED if args.seed is None else args.seed
+        write_samples_csv(args.samples, synthetic_samples(np.random.default_rng(seed)))
+    samples = read_samples_csv(args.samples)
+    fits = characterize(samples, radius=args.radius, pressure_step=args.pressure_step)
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, 'table3.csv'), 'w', encoding='utf-8') as handle:
+        handle.write(table3_csv(fits))
+    with open(os.path.join(args.out, 'table3.md'), 'w', encoding='utf-8') as handle:
+        handle.write(table3_markdown(fits))
+    plot_characteristic(samples, fits, os.path.join(args.out, 'fig9.png'),
+                        pressure_step=args.pressure_step)
     print(table3_markdown(fits), end='')
     print(f'wrote {", ".join(os.path.join(args.out, n) for n in _OUTPUTS)}')
     return 0

@@ -51,13 +51,14 @@ from numba import guvectorize, njit
 import numpy as np
 import numpy.typing as npt
 
-from inflarm_model.kinematics import all_finite, dh_chain_kinematics
+from inflarm_model.kinematics import dh_chain_kinematics
 from inflarm_model.urdf import (
     DEFAULT_STIFFNESS,
     MOTOR_INDICES,
     SPRING_DEFLECTION_LIMIT,
     SPRING_INDICES,
 )
+from inflarm_model.validation import check_batch
 
 __all__ = [
     'DEFAULT_MAX_ITERATIONS',
@@ -69,11 +70,8 @@ __all__ = [
     'STATUS_NAMES',
     'ElastostaticSolution',
     'check_arm',
-    'check_batch',
-    'check_rows',
     'check_solver_options',
     'check_stiffness',
-    'check_vector',
     'conditioning',
     'conditioning_sample',
     'equilibrium_stiffness',
@@ -114,45 +112,6 @@ _JIT = dict(cache=True, error_model='numpy')
 
 
 # --- validation ------------------------------------------------------------------------------
-
-
-def check_vector(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
-    """Return ``x`` as a finite float array of shape (n,) or raise naming ``name``."""
-    try:
-        v = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape ({n},) [{unit}], got {x!r}') from None
-    if v.shape != (n,):
-        raise ValueError(f'expected {name} of shape ({n},) [{unit}], got shape {v.shape}')
-    if not all_finite(v):
-        raise ValueError(f'expected {name} to be finite [{unit}], got {v}')
-    return v
-
-
-def check_rows(name: str, X: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
-    """Return ``X`` as a finite float array of shape (N, n) or raise naming ``name``."""
-    try:
-        V = np.asarray(X, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got {X!r}') from None
-    if V.ndim != 2 or V.shape[1] != n:
-        raise ValueError(f'expected {name} of shape (N, {n}) [{unit}], got shape {V.shape}')
-    if not np.isfinite(V).all():
-        raise ValueError(f'expected {name} to be finite [{unit}], got non-finite entries')
-    return V
-
-
-def check_batch(name: str, x: npt.ArrayLike, n: int, unit: str) -> npt.NDArray[np.float64]:
-    """Return ``x`` as a finite float array of shape (..., n) or raise naming ``name``."""
-    try:
-        v = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape (..., {n}) [{unit}], got {x!r}') from None
-    if v.ndim == 0 or v.shape[-1] != n:
-        raise ValueError(f'expected {name} of shape (..., {n}) [{unit}], got shape {v.shape}')
-    if not np.isfinite(v).all():
-        raise ValueError(f'expected {name} to be finite [{unit}], got non-finite entries')
-    return v
 
 
 def check_stiffness(stiffness: npt.ArrayLike) -> npt.NDArray[np.float64]:

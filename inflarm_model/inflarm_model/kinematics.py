@@ -42,6 +42,7 @@ from inflarm_model.urdf import (
     flexible_dh_table,
     rigid_dh_table,
 )
+from inflarm_model.validation import check_rows, check_vector
 
 __all__ = [
     'DHChain',
@@ -54,59 +55,9 @@ __all__ = [
     'dh_transform',
 ]
 
-# Bound once: module attribute lookups are a visible share of a ~2 us call.
-_asarray = np.asarray
-_isfinite = math.isfinite
-_hypot = math.hypot
-# Index arrays of MOTOR_INDICES and SPRING_INDICES (an array indexes 8x faster than a list).
+# Index arrays of MOTOR_INDICES and SPRING_INDICES: numpy fancy indexing takes an integer array
+# without converting a list on every call.
 _MOTOR_INDEX, _SPRING_INDEX = np.array(MOTOR_INDICES), np.array(SPRING_INDICES)
-
-
-def all_finite(v: npt.NDArray[np.float64]) -> bool:
-    """Whether every entry of a small float vector ``v`` (shape (n,)) is finite.
-
-    hypot of the entries is finite iff every entry is, unless finite entries overflow it (then
-    the entry-wise test decides): one C call on a list, a fraction of the cost of
-    ``np.isfinite(v).all()`` for the few entries of a joint vector.
-    """
-    return _isfinite(_hypot(*v.tolist())) or bool(np.isfinite(v).all())
-
-
-def _vector(name: str, x: npt.ArrayLike, n: int) -> npt.NDArray[np.float64]:
-    """Return ``x`` as a finite float array of shape (n,) or raise naming ``name``."""
-    try:
-        v = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape ({n},), got {x!r}') from None
-    if v.shape != (n,):
-        raise ValueError(f'expected {name} of shape ({n},), got {v.shape}')
-    if not all_finite(v):
-        raise ValueError(f'expected {name} to be finite, got {v}')
-    return v
-
-
-def _batch(name: str, X: npt.ArrayLike, n: int) -> npt.NDArray[np.float64]:
-    """Return ``X`` as a finite float array of shape (N, n) or raise naming ``name``."""
-    try:
-        V = np.asarray(X, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} of shape (N, {n}), got {X!r}') from None
-    if V.ndim != 2 or V.shape[1] != n:
-        raise ValueError(f'expected {name} of shape (N, {n}), got {V.shape}')
-    if not np.isfinite(V).all():
-        raise ValueError(f'expected {name} to be finite, got non-finite entries')
-    return V
-
-
-def _joint_vector(q: npt.ArrayLike, shape: tuple[int]) -> npt.NDArray[np.float64]:
-    """``_vector('q', q, n)`` at a fraction of the cost, for the per-call hot paths."""
-    try:
-        v = _asarray(q, dtype=float)
-    except (TypeError, ValueError):
-        return _vector('q', q, shape[0])
-    if v.shape != shape or not all_finite(v):
-        return _vector('q', q, shape[0])
-    return v
 
 
 # --- reference implementation: plain per-joint DH chain --------------------------------------
@@ -166,7 +117,7 @@ def dh_frames_reference(
         On a malformed table, or ``q`` of the wrong shape or not finite.
     """
     table = check_dh_table(dh_table)
-    q = _vector('q', q, table.shape[0])
+    q = check_vector('q', q, table.shape[0])
     frames = [np.eye(4)]
     for (a, alpha, d), theta in zip(table, q, strict=True):
         frames.append(frames[-1] @ dh_transform(a, alpha, d, theta))
@@ -324,7 +275,6 @@ class DHChain:
         table.setflags(write=False)
         self._dh_table = table
         self._n = n = table.shape[0]
-        self._shape = (n,)
         self.joint_names: tuple[str, ...] = check_joint_names(joint_names, n)
 
     @property
@@ -356,7 +306,7 @@ class DHChain:
 
     def _pass(self, q: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], ...]:
         """Tip pose (4, 4), Jacobian (6, n) and frame origins (n + 1, 3) of one configuration."""
-        q = _joint_vector(q, self._shape)
+        q = check_vector('q', q, self._n)
         pose = np.empty((4, 4))
         jacobian = np.empty((6, self._n))
         origins = np.empty((self._n + 1, 3))
@@ -435,7 +385,7 @@ class DHChain:
         self, Q: npt.ArrayLike
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Tip poses (N, 4, 4) and Jacobians (N, 6, n) of the rows of Q, compiled."""
-        Q = np.ascontiguousarray(_batch('Q', Q, self._n))
+        Q = np.ascontiguousarray(check_rows('Q', Q, self._n))
         poses = np.empty((Q.shape[0], 4, 4))
         jacobians = np.empty((Q.shape[0], 6, self._n))
         _dh_chain_rows(self._dh_table, Q, poses, jacobians)
@@ -623,8 +573,8 @@ class FlexibleArm(DHChain):
             If an argument has the wrong shape or is not finite.
         """
         q = np.empty(7)
-        q[_MOTOR_INDEX] = _vector('q_m', q_m, 3)
-        q[_SPRING_INDEX] = _vector('q_k', q_k, 4)
+        q[_MOTOR_INDEX] = check_vector('q_m', q_m, 3)
+        q[_SPRING_INDEX] = check_vector('q_k', q_k, 4)
         return q
 
     @classmethod
@@ -650,5 +600,5 @@ class FlexibleArm(DHChain):
         ValueError
             If ``q`` has the wrong shape or is not finite.
         """
-        q = _vector('q', q, 7)
+        q = check_vector('q', q, 7)
         return q[_MOTOR_INDEX], q[_SPRING_INDEX]

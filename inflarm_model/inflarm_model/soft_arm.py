@@ -36,6 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from inflarm_model.validation import check_batch
+
 CHAMBERS = ('PEA', 'B1', 'B2', 'B3', 'B4')
 """Pressure channels in command order; PEA is PEA1 and PEA2 joined by the T-pipe (one pressure)."""
 
@@ -114,15 +116,6 @@ class SoftArmConfiguration:
     bend_angle: float | npt.NDArray[np.float64]
 
 
-def _as_points(point: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
-    p = np.asarray(point, dtype=float)
-    if p.ndim == 0 or p.shape[-1] != 3:
-        raise ValueError(f'expected {name} of shape (3,) or (..., 3), got {p.shape}')
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f'expected finite {name} [m], got {p}')
-    return p
-
-
 def _scalar_or_array(a: npt.NDArray[np.float64]) -> float | npt.NDArray[np.float64]:
     return float(a) if a.ndim == 0 else a
 
@@ -168,7 +161,7 @@ def pea_length_from_end_point(end_point: npt.ArrayLike) -> float | npt.NDArray[n
     l1 : float or ndarray, shape (...)
         PEA length [m].
     """
-    p = _as_points(end_point, 'end_point')
+    p = check_batch('end_point', end_point, 3, 'm', single=True)
     z = p[..., 2]
     if np.any(z <= 0.0):
         raise ValueError(
@@ -227,7 +220,7 @@ def inverse_kinematics(end_point: npt.ArrayLike) -> SoftArmConfiguration:
     SoftArmConfiguration
         Floats for one point, arrays of shape (...) for a batch.
     """
-    p = _as_points(end_point, 'end_point')
+    p = check_batch('end_point', end_point, 3, 'm', single=True)
     l1 = np.asarray(pea_length_from_end_point(p))
     r = np.hypot(p[..., 0], p[..., 1])
     theta = 2.0 * np.arctan2(r, p[..., 2])
@@ -250,7 +243,7 @@ def central_axes(end_point: npt.ArrayLike) -> npt.NDArray[np.float64]:
         ``axes[..., 0, :, :]`` is PEA1 from the mount ``(0, 0, 0)`` to the PBA ``(0, 0, l1)``;
         ``axes[..., 1, :, :]`` is PEA2 from the PBA to the end point [m].
     """
-    p = _as_points(end_point, 'end_point')
+    p = check_batch('end_point', end_point, 3, 'm', single=True)
     l1 = np.asarray(pea_length_from_end_point(p))
     joint = np.zeros(p.shape)
     joint[..., 2] = l1
@@ -321,7 +314,7 @@ def check_in_workspace(
         Naming the first violated bound, e.g.
         ``'target z = 1.100 m above the workspace maximum 0.990 m'``.
     """
-    p = _as_points(point, name)
+    p = check_batch(name, point, 3, 'm', single=True)
     flat = p.reshape(-1, 3)
     checks = (
         (0, flat[:, 0] > workspace.x_max, 'above the workspace maximum', workspace.x_max),

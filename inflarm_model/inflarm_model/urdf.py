@@ -49,6 +49,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import numpy.typing as npt
 
+from inflarm_model.validation import check_positive
+
 INFLARM_XMLNS = 'https://inflarm.org/xmlns/urdf'
 
 BASE_LINK = 'base_link'
@@ -122,21 +124,6 @@ def check_joint_positions(names, positions) -> None:
                              f'[{lower:.4g}, {upper:.4g}] rad')
 
 
-def _positive(name: str, value: float, what: str) -> float:
-    """Return ``value`` as a positive finite float or raise naming ``name`` and ``what``."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        x = math.nan
-    if not (math.isfinite(x) and x > 0.0):
-        raise ValueError(f'expected {name} to be a positive finite {what}, got {value!r}')
-    return x
-
-
-def _length(name: str, value: float) -> float:
-    return _positive(name, value, 'length [m]')
-
-
 def rigid_dh_table(link_length: float = DEFAULT_LINK_LENGTH) -> npt.NDArray[np.float64]:
     """Constant DH parameters of the rigid 3-DOF arm, Table 1 of 000_ce37cf035a0a87c6.
 
@@ -156,7 +143,7 @@ def rigid_dh_table(link_length: float = DEFAULT_LINK_LENGTH) -> npt.NDArray[np.f
     ValueError
         If ``link_length`` is not a positive finite number.
     """
-    L = _length('link_length', link_length)
+    L = check_positive('link_length', link_length, 'm', 'length')
     return np.array([
         [0.0, math.pi / 2, 0.0],
         [L, 0.0, 0.0],
@@ -188,8 +175,8 @@ def flexible_dh_table(
     ValueError
         If a length is not positive and finite or ``spring_offset >= link_length``.
     """
-    L = _length('link_length', link_length)
-    l1 = _length('spring_offset', spring_offset)
+    L = check_positive('link_length', link_length, 'm', 'length')
+    l1 = check_positive('spring_offset', spring_offset, 'm', 'length')
     if l1 >= L:
         raise ValueError(
             f'expected spring_offset < link_length ({L!r} m), got {spring_offset!r}'
@@ -392,13 +379,13 @@ def dh_chain_urdf(
     """
     table = check_dh_table(dh_table)
     names = check_joint_names(joint_names, table.shape[0])
-    radius = _length('radius', radius)
-    thickness = _length('thickness', thickness)
+    radius = check_positive('radius', radius, 'm', 'length')
+    thickness = check_positive('thickness', thickness, 'm', 'length')
     springs = {}
     for joint, k in (spring_stiffness or {}).items():
         if joint not in names:
             raise ValueError(f'expected spring_stiffness keys among {names}, got {joint!r}')
-        springs[joint] = _positive(f'spring_stiffness[{joint!r}]', k, 'stiffness [N m/rad]')
+        springs[joint] = check_positive(f'spring_stiffness[{joint!r}]', k, 'N m/rad', 'stiffness')
     caps = dict(caps or {})
     if not set(caps) <= set(names):
         raise ValueError(f'expected caps keys among {names}, got {sorted(caps)}')
@@ -574,7 +561,7 @@ def spring_stiffness_from_urdf(text: str) -> dict[str, float]:
             raise ValueError(
                 f'expected each spring joint once and declared as a <joint>, got {joint!r}'
             )
-        springs[joint] = _positive(f'stiffness of {joint!r}', value, 'stiffness [N m/rad]')
+        springs[joint] = check_positive(f'stiffness of {joint!r}', value, 'N m/rad', 'stiffness')
     return springs
 
 

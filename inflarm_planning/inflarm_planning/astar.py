@@ -48,6 +48,7 @@ import numpy as np
 import numpy.typing as npt
 
 from inflarm_model.soft_arm import WORKSPACE_POSITIVE, Workspace, check_in_workspace
+from inflarm_model.validation import check_vector
 from inflarm_planning.collision import (
     CHECK_STEP,
     Cuboid,
@@ -135,15 +136,6 @@ class PlanResult:
     def length(self) -> float:
         """Length of `path` [m]."""
         return float(np.linalg.norm(np.diff(self.path, axis=0), axis=1).sum())
-
-
-def _endpoint(point: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
-    p = np.asarray(point, dtype=float)
-    if p.shape != (3,):
-        raise ValueError(f'expected {name} of shape (3,), got {p.shape}')
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f'expected finite {name} [m], got {p.tolist()}')
-    return p
 
 
 def _outside(point: np.ndarray, workspace: Workspace) -> bool:
@@ -293,8 +285,8 @@ def plan(
         Start or goal outside the work space, inside an alert region, with an axis across
         one, or with no free grid point in reach; or no connection (the open set emptied).
     """
-    start = _endpoint(start, 'start')
-    goal = _endpoint(goal, 'goal')
+    start = check_vector('start', start, 3, 'm')
+    goal = check_vector('goal', goal, 3, 'm')
     if np.array_equal(start, goal):
         raise ValueError(f'expected start != goal, both are {start.tolist()}')
     if cost not in COSTS:

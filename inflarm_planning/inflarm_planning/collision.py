@@ -22,6 +22,7 @@ import numpy.typing as npt
 
 from inflarm_model import alert_regions
 from inflarm_model.soft_arm import pea_length_from_end_point
+from inflarm_model.validation import check_batch, check_positive, check_vector
 import inflarm_msgs_json
 
 SEGMENT_CHUNK = 1 << 18
@@ -29,15 +30,6 @@ SEGMENT_CHUNK = 1 << 18
 
 CHECK_STEP = 0.001
 """Default spacing of the poses `motions_collide` samples along a motion [m]."""
-
-
-def _vec3(value: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
-    v = np.asarray(value, dtype=float)
-    if v.shape != (3,):
-        raise ValueError(f'expected {name} of shape (3,), got {v.shape}')
-    if not np.all(np.isfinite(v)):
-        raise ValueError(f'expected finite {name} [m], got {v.tolist()}')
-    return v
 
 
 @dataclass(frozen=True)
@@ -69,8 +61,8 @@ class Cuboid:
     name: str = ''
 
     def __post_init__(self) -> None:
-        low = _vec3(self.min_corner, 'min_corner')
-        high = _vec3(self.max_corner, 'max_corner')
+        low = check_vector('min_corner', self.min_corner, 3, 'm')
+        high = check_vector('max_corner', self.max_corner, 3, 'm')
         for axis in range(3):
             if low[axis] > high[axis]:
                 raise ValueError(
@@ -175,15 +167,6 @@ def _check_boxes(boxes: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return b
 
 
-def _check_points(points: npt.ArrayLike, name: str) -> npt.NDArray[np.float64]:
-    p = np.asarray(points, dtype=float)
-    if p.ndim == 0 or p.shape[-1] != 3:
-        raise ValueError(f'expected {name} of shape (..., 3), got {p.shape}')
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f'expected finite {name} [m]')
-    return p
-
-
 def points_in_boxes(points: npt.ArrayLike, boxes: npt.ArrayLike) -> npt.NDArray[np.bool_]:
     """Whether each point lies in (or on the surface of) any of the boxes.
 
@@ -198,7 +181,7 @@ def points_in_boxes(points: npt.ArrayLike, boxes: npt.ArrayLike) -> npt.NDArray[
     -------
     inside : ndarray of bool, shape (...)
     """
-    p = _check_points(points, 'points')
+    p = check_batch('points', points, 3, 'm')
     b = _check_boxes(boxes)
     inside = np.zeros(p.shape[:-1], dtype=bool)
     for low, high in b:
@@ -256,8 +239,8 @@ def segments_hit_boxes(
     -------
     hit : ndarray of bool, broadcast shape (...)
     """
-    a = _check_points(a, 'a')
-    b = _check_points(b, 'b')
+    a = check_batch('a', a, 3, 'm')
+    b = check_batch('b', b, 3, 'm')
     boxes = _check_boxes(boxes)
     a, b = np.broadcast_arrays(a, b)
     shape = a.shape[:-1]
@@ -328,7 +311,7 @@ def arm_contacts(end_points: npt.ArrayLike, boxes: npt.ArrayLike) -> ArmContacts
     -------
     ArmContacts
     """
-    p = _check_points(end_points, 'end_points')
+    p = check_batch('end_points', end_points, 3, 'm')
     b = _check_boxes(boxes)
     pea1, pea2 = _axis_hits(p.reshape(-1, 3), b)
     return ArmContacts(end=points_in_boxes(p, b), pea1=pea1.reshape(p.shape[:-1]),
@@ -352,7 +335,7 @@ def arm_collides(end_points: npt.ArrayLike, boxes: npt.ArrayLike) -> npt.NDArray
     -------
     collides : ndarray of bool, shape (...)
     """
-    p = _check_points(end_points, 'end_points')
+    p = check_batch('end_points', end_points, 3, 'm')
     pea1, pea2 = _axis_hits(p.reshape(-1, 3), _check_boxes(boxes))
     return (pea1 | pea2).reshape(p.shape[:-1])
 
@@ -382,11 +365,10 @@ def motions_collide(
     -------
     collides : ndarray of bool, shape (M,) (or () for single points)
     """
-    a = _check_points(a, 'a')
-    b = _check_points(b, 'b')
+    a = check_batch('a', a, 3, 'm')
+    b = check_batch('b', b, 3, 'm')
     boxes = _check_boxes(boxes)
-    if not (np.isfinite(step) and step > 0.0):
-        raise ValueError(f'expected step > 0 m, got {step!r}')
+    step = check_positive('step', step, 'm', 'length')
     a, b = np.broadcast_arrays(a, b)
     shape = a.shape[:-1]
     a = a.reshape(-1, 3)
@@ -420,7 +402,7 @@ def describe_collision(
         E.g. ``"the end is inside the alert region of obstacle 0 'box'"``; the first obstacle
         (in order) that the arm meets is named.
     """
-    p = _vec3(end_point, 'end_point')
+    p = check_vector('end_point', end_point, 3, 'm')
     cuboids = as_cuboids(obstacles)
     boxes = box_array(cuboids, alert_margin)
     for k, cuboid in enumerate(cuboids):
@@ -451,7 +433,7 @@ def distance_to_boxes(points: npt.ArrayLike, boxes: npt.ArrayLike) -> npt.NDArra
     -------
     distance : ndarray, shape (...)
     """
-    p = _check_points(points, 'points')
+    p = check_batch('points', points, 3, 'm')
     b = _check_boxes(boxes)
     if len(b) == 0:
         raise ValueError('expected at least one box')
@@ -484,5 +466,5 @@ def repulsive_offset(
     offset : ndarray, shape (3,) or (..., 3)
         Displacement [m]; its norm is the depth into the alert region (summed over regions).
     """
-    p = _check_points(end_point, 'end_point')
+    p = check_batch('end_point', end_point, 3, 'm')
     return alert_regions.repulsive_offset(p, box_array(obstacles, alert_margin))

@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from inflarm_model.soft_arm import WORKSPACE_POSITIVE, Workspace
+from inflarm_model.validation import check_positive
 from inflarm_planning.collision import Cuboid, arm_collides, as_cuboids, box_array, check_margin
 
 MAX_CELLS = 120_000_000
@@ -37,13 +38,7 @@ CACHE_SIZE = 4
 
 def check_resolution(resolution: float) -> float:
     """Validate a grid resolution: a finite number > 0 [m]."""
-    try:
-        value = float(resolution)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected resolution to be a number [m], got {resolution!r}') from None
-    if not math.isfinite(value) or value <= 0.0:
-        raise ValueError(f'expected resolution > 0 m, got {resolution!r}')
-    return value
+    return check_positive('resolution', resolution, 'm', 'length')
 
 
 @dataclass(frozen=True)

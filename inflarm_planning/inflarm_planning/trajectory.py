@@ -26,6 +26,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from inflarm_model.validation import check_positive
 from inflarm_planning.astar import PlanResult, plan
 from inflarm_planning.collision import CHECK_STEP, box_array, check_margin, motions_collide
 
@@ -90,16 +91,6 @@ def _check_path(path: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return p
 
 
-def _positive(value: float, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f'expected {name} to be a number, got {value!r}') from None
-    if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f'expected {name} > 0, got {value!r}')
-    return v
-
-
 def path_length(path: npt.ArrayLike) -> float:
     """Length of a polyline, shape (N, 3) [m]."""
     p = np.asarray(path, dtype=float)
@@ -157,7 +148,7 @@ def shortcut(
         A subsequence of ``path`` with the same ends.
     """
     p = _check_path(path)
-    check_step = _positive(check_step, 'check_step')
+    check_step = check_positive('check_step', check_step, 'm', 'length')
     kept = [0]
     i = 0
     while i < len(p) - 1:
@@ -202,7 +193,7 @@ def smooth(
         Same first and last points.
     """
     p = _check_path(path)
-    check_step = _positive(check_step, 'check_step')
+    check_step = check_positive('check_step', check_step, 'm', 'length')
     if isinstance(iterations, bool) or not isinstance(iterations, int | np.integer) \
             or iterations < 0:
         raise ValueError(f'expected iterations to be an int >= 0, got {iterations!r}')
@@ -254,7 +245,7 @@ def resample(path: npt.ArrayLike, max_step: float) -> npt.NDArray[np.float64]:
         Every original point is kept; the new ones lie on the segments.
     """
     p = _check_path(path)
-    max_step = _positive(max_step, 'max_step')
+    max_step = check_positive('max_step', max_step, 'm', 'length')
     lengths = np.linalg.norm(np.diff(p, axis=0), axis=1)
     pieces = np.maximum(np.ceil(lengths / max_step - 1e-9).astype(np.int64), 1)
     rows = []
@@ -289,8 +280,8 @@ def time_parameterize(
         From 0, strictly increasing [s].
     """
     p = _check_path(path)
-    v = _positive(max_speed, 'max_speed')
-    a = _positive(max_accel, 'max_accel')
+    v = check_positive('max_speed', max_speed, 'm/s', 'speed')
+    a = check_positive('max_accel', max_accel, 'm/s^2', 'acceleration')
     lengths = np.linalg.norm(np.diff(p, axis=0), axis=1)
     if np.any(lengths <= 0.0):
         raise ValueError('expected a path without repeated points')
@@ -373,9 +364,11 @@ def plan_trajectory(
         When no path exists.
     """
     # validate the trajectory arguments before searching
-    for name, value in (('max_step', max_step), ('max_speed', max_speed),
-                        ('max_accel', max_accel), ('check_step', check_step)):
-        _positive(value, name)
+    for name, value, unit, quantity in (('max_step', max_step, 'm', 'length'),
+                                        ('max_speed', max_speed, 'm/s', 'speed'),
+                                        ('max_accel', max_accel, 'm/s^2', 'acceleration'),
+                                        ('check_step', check_step, 'm', 'length')):
+        check_positive(name, value, unit, quantity)
     smooth(np.zeros((2, 3)), np.zeros((0, 2, 3)), smoothing)  # validates smoothing
     grid = plan(*plan_args, **plan_kwargs)
     space = grid.free_space

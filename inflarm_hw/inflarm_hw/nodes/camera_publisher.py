@@ -15,7 +15,7 @@ executable).
         before it, a subscriber to both received half the images over UDP in a test here).
 
 Frames are captured at the node's ``camera_rate_hz`` and only while the image topic has a
-subscriber (rendering costs about 10-20 ms a frame at 640x480).
+subscriber: rendering a frame is the costliest work of the node's thread.
 
 Parameters (`CAMERA_PARAMETERS`, declared by the node with its own; the defaults are those of
 `inflarm_hw.synthetic_camera.SraCamera`, which tools without ROS render with):

@@ -4,16 +4,18 @@ In the spirit of cv_bridge's ``imgmsg_to_cv2`` / ``cv2_to_imgmsg``:
 
 - `image_to_numpy(msg)`: the pixels as an array, ``(height, width)`` for one channel,
   ``(height, width, channels)`` otherwise, in native byte order. For 8-bit data it is a view
-  of ``msg.data`` (no copy, about 10 us for 1920x1080 bgr8; writing to it writes the message),
-  with row padding (``step``) skipped by strides. Multi-byte data whose ``is_bigendian`` differs
-  from this machine's is byte-swapped into a copy.
+  of ``msg.data`` (no copy; writing to it writes the message), with row padding (``step``)
+  skipped by strides. Multi-byte data whose ``is_bigendian`` differs from this machine's is
+  byte-swapped into a copy.
 - `image_to_bgr(msg)`: an 8-bit BGR array for the colour and mono encodings (OpenCV's
   conversions; a view for ``bgr8``).
 - `numpy_to_image(array, encoding, header=None)`: a message with ``step = width * pixel
   bytes`` (no padding) and ``is_bigendian`` from the array's byte order. The pixels go into
-  ``msg.data`` as one ``array.array`` built from the buffer (about 1 ms for 1920x1080 bgr8);
-  never assign an ndarray to ``msg.data``: rosidl converts it element by element (about
-  100 ms at 640x480).
+  ``msg.data`` as one ``array.array`` built from the buffer (one copy); never assign an
+  ndarray to ``msg.data``: rosidl converts it element by element.
+
+``benchmarks/bench_vision.py`` times both conversions; ``inflarm_msgs_json/README.md`` says what
+the element-by-element conversion costs.
 
 Encodings (names of ``sensor_msgs/image_encodings.hpp``):
 

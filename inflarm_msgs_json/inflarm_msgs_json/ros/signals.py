@@ -116,8 +116,8 @@ def interruptible_startup() -> Iterator[None]:
     """Within this block (main thread), a stop request raises `StartupInterrupted` at once.
 
     For start-up work that holds nothing accepted yet: importing a node module, building the
-    nodes (a renderer, a model: up to seconds on a loaded machine). A stop request that came
-    before the block is raised on entry. Nested blocks are one window.
+    nodes (a renderer, a model), which can take long. A stop request that came before the
+    block is raised on entry. Nested blocks are one window.
 
     Where the exception lands in a C extension's callback, it cannot propagate: the extension
     reports it instead, through ``sys.unraisablehook`` ("Exception ignored in ...", seen in
