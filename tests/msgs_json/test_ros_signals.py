@@ -95,3 +95,39 @@ def test_a_stop_request_that_an_extension_reports_with_a_traceback_stops_quietly
     assert run.returncode == 0, run.stderr
     assert 'main ran' not in run.stdout
     assert 'StartupInterrupted' not in run.stderr and 'Traceback' not in run.stderr, run.stderr
+
+
+# An object whose construction the stop request interrupts, kept by a registry, and whose
+# finalizer then fails at exit for what its __init__ never set: what llvmlite's ObjectRef did
+# when a load_estimator was stopped while numba loaded its kernels ("Exception ignored in:
+# <function ObjectRef.__del__ ...> AttributeError: ... '_as_parameter_'", a run of the
+# interrupt stress test).
+HALF_BUILT_NODE = """
+import os, signal
+from rclpy.node import Node
+from inflarm_msgs_json.ros.spin import spin_node
+REGISTRY = []
+class Handle:
+    def __init__(self):
+        REGISTRY.append(self)
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(100_000):  # the handler runs here, before the handle is set
+            pass
+        self._as_parameter_ = 1
+    def __del__(self):
+        del self._as_parameter_
+class HalfBuilt(Node):
+    def __init__(self):
+        super().__init__('half_built')
+        self.handle = Handle()
+        print('built')
+def main():
+    spin_node(HalfBuilt, [])
+"""
+
+
+def test_objects_a_stop_request_left_half_built_do_not_report_at_exit(tmp_path, domain_id):
+    run = run_entry_point(tmp_path, 'half_built', HALF_BUILT_NODE, ROS_DOMAIN_ID=str(domain_id))
+    assert run.returncode == 0, run.stderr
+    assert 'built' not in run.stdout
+    assert 'Exception ignored' not in run.stderr and 'Traceback' not in run.stderr, run.stderr

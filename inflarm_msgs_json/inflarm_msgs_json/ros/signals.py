@@ -111,6 +111,11 @@ def _quiet_excepthook(hook: Callable) -> Callable:
     return excepthook
 
 
+def _ignore_unraisable(info) -> None:
+    """``sys.unraisablehook`` of a process that only stops: reports nothing (no global names:
+    it may run while the interpreter finalizes the modules)."""
+
+
 @contextlib.contextmanager
 def interruptible_startup() -> Iterator[None]:
     """Within this block (main thread), a stop request raises `StartupInterrupted` at once.
@@ -123,7 +128,11 @@ def interruptible_startup() -> Iterator[None]:
     reports it instead, through ``sys.unraisablehook`` ("Exception ignored in ...", seen in
     scipy's Sobol table loading) and, for Cython's full tracebacks, ``sys.excepthook`` too
     (seen there as well). Both stay quiet about it inside the block; the stop request is
-    kept, and start-up stops at its next check.
+    kept, and start-up stops at its next check. A process whose start-up a stop request
+    reached only stops from then on, and the objects the request left half-built (an
+    extension's wrapper whose ``__init__`` it interrupted: llvmlite's ``ObjectRef``, seen
+    there) fail in their finalizers, at exit at the latest: ``sys.unraisablehook`` stays quiet
+    for the rest of the process.
     """
     global _abort_startup
     if _abort_startup:
@@ -140,6 +149,8 @@ def interruptible_startup() -> Iterator[None]:
     finally:
         _abort_startup = False
         sys.unraisablehook, sys.excepthook = hooks
+        if _stop.is_set():
+            sys.unraisablehook = _ignore_unraisable
 
 
 def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
