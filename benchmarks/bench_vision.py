@@ -144,7 +144,8 @@ def bench_detection(background: str, sizes, frames_per_size: int, rounds: int) -
         }, rounds, min_time_s=0.05)
         row = {name: t.median_s / n for name, t in timing.items()}
         row.update(size=f'{width}x{height}', background=background, radius_px=radius,
-                   searches=tracker.full_frame_searches - 1)
+                   searches=tracker.full_frame_searches - 1,
+                   region_searches=tracker.region_searches)
         pairs = list(zip(images, truths, strict=True))
         row['accuracy'] = {
             'plain': accuracy([centre_error(plain_pipeline(im), t) for im, t in pairs]),
@@ -308,7 +309,8 @@ def rows(m: dict) -> list[Row]:
                 'a copy of each new frame', d['cold'] * 1e3,
                 Target(ratio_at_most=TRACKING_TARGET_COPIES),
                 f"{d['tracking'] / d['hot']:.1f} copies of a frame in the cache; "
-                f"{d['searches']} whole-frame searches after the first frame"),
+                f"{d['region_searches']} region and {d['searches']} whole-frame searches after "
+                'the first frame'),
             Row(f'detect_ball (whole frame), {where}', d['detect'] * 1e3, 'ms',
                 'plain HSV pipeline', d['plain'] * 1e3, Target(at_most=DETECT_TARGET_MS),
                 f"{found_note('detect_ball', acc['detect'])}; "
@@ -372,7 +374,8 @@ def main(argv: list[str] | None = None) -> int:
         tracking = d['tracking']
         print(f'    {"tracking mode":19s} {tracking * 1e3:7.3f} ms = {tracking / hot:5.1f} hot / '
               f'{tracking / cold:5.1f} new-frame copies, {tracking / plain:4.2f} x plain; '
-              f"{d['searches']} whole-frame searches after the first frame")
+              f"{d['region_searches']} region and {d['searches']} whole-frame searches after "
+              'the first frame')
     c = m['conversion']
     print('image conversion, 1920x1080 bgr8 (target Image -> numpy <= 1 ms)')
     print(f"    frame copy                 {c['copy'] * 1e3:8.3f} ms")

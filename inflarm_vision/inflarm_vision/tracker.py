@@ -872,6 +872,8 @@ class BallTracker:
     ----------
     last : BallDetection or None
         The last detection (None when lost).
+    region_searches : int
+        Frames whose predicted outline was not found, so the tracking region was searched.
     full_frame_searches : int
         Frames that needed a whole-image search.
     """
@@ -888,6 +890,7 @@ class BallTracker:
         self.search_radii = float(search_radii)
         self.search_margin_px = float(search_margin_px)
         self.last: BallDetection | None = None
+        self.region_searches = 0
         self.full_frame_searches = 0
         self._previous: npt.NDArray[np.float64] | None = None  # centre before the last
         self._frames = 0
@@ -914,11 +917,14 @@ class BallTracker:
                         else 0.5 * (last.center - self._previous))
             self._frames += 1
             sigma = None if self._frames % 16 == 0 else last.blur_px
-            # the predicted outline is the fine pass's guess already
+            # the predicted outline is the fine pass's guess already; the prediction is off by
+            # up to 1.5 times the last motion when the ball moves as far as it did (3 |v| at a
+            # reversal), and a start off the ball by more than its radius finds no outline
+            margin = 1.0 + min(3.0 * float(np.hypot(*velocity)), last.radius)
             detection = _fine(image, last.center + velocity, last.radius, last.colour_bgr,
-                              self.params, margin_px=1.0 + float(np.hypot(*velocity)),
-                              sigma=sigma)
+                              self.params, margin_px=margin, sigma=sigma)
             if not _accept(detection, self.params):
+                self.region_searches += 1
                 half = self.search_radii * last.radius + self.search_margin_px
                 u, v = last.center + velocity
                 region = (int(math.floor(u - half)), int(math.floor(v - half)),

@@ -86,6 +86,30 @@ def test_tracking_follows_the_ball_and_searches_the_whole_frame_when_lost():
     assert tracker.full_frame_searches == 4
 
 
+def test_tracking_keeps_a_ball_that_moves_at_random_and_turns_back_without_searching():
+    # the prediction (half the last motion again) is off by 1.5 times the last motion where the
+    # ball turns back, more where it speeds up: the predicted outline must still be found, not
+    # the tracking region searched (4 passes more). Only where it starts to move is the
+    # prediction (where it was at rest) off by the whole step.
+    camera = SyntheticCamera(CAMERA, RigidTransform.identity(), BALL_RADIUS,
+                             Scene(background='noise', blur_sigma_px=0.6), seed=5)
+    rng = np.random.default_rng(11)
+    steps = rng.normal(0.0, 0.006, (10, 2))  # about 7 px a frame, each axis
+    # at rest when first seen, then there and back again
+    walk = np.cumsum(np.vstack([np.zeros((2, 2)), steps, -steps[::-1]]), axis=0)
+    tracker = BallTracker()
+    searched = []
+    for k, offset in enumerate(walk):
+        frame = camera.render(np.array([offset[0], offset[1], 0.8]))
+        before = tracker.region_searches
+        detection = tracker.update(frame.image)
+        assert np.linalg.norm(detection.center - frame.truth.center_px) < 0.2
+        if tracker.region_searches > before:
+            searched.append(k)
+    assert tracker.full_frame_searches == 1
+    assert set(searched) <= {2}  # the first step (before: frames 2 and 6, 13.5 px after 3.9 px)
+
+
 def test_a_ball_cut_by_the_image_border_is_rejected_or_still_accurate():
     camera = SyntheticCamera(CAMERA, scene=Scene(background='plain'), seed=1)
     frame = camera.render(np.array([0.345, 0.0, 0.9]))  # about a third outside on the right

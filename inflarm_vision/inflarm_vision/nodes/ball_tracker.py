@@ -217,6 +217,8 @@ class BallTrackerNode(GuardedCallbacks, Node):
                 KeyValue(key='latency_max_ms',
                          value=f'{max(w.latency_s) * 1e3:.2f}' if w.latency_s else 'n/a'),
                 KeyValue(key='processing_mean_ms', value=stat(w.processing_s, 1e3)),
+                KeyValue(key='region_searches',
+                         value=str(self.pipeline.tracker.region_searches)),
                 KeyValue(key='full_frame_searches',
                          value=str(self.pipeline.tracker.full_frame_searches)),
                 KeyValue(key='last_problem', value='; '.join(
