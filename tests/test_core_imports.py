@@ -1,10 +1,11 @@
 """Algorithm cores import without rclpy (only `nodes` and `ros` modules may pull it in), and
-without matplotlib (plots import it when they draw).
+without matplotlib (plots import it when they draw); no module imports itself through others.
 
 The one test of this for every core module: the modules are discovered in each package, so a new
 core is covered without a test of its own.
 """
 
+import ast
 import json
 import pathlib
 import pkgutil
@@ -67,3 +68,47 @@ def test_core_modules_import_without_rclpy_or_matplotlib(package, first_imported
     offenders = {m: found for m, found in first_imported_by.items()
                  if m in core_modules(package) and found}
     assert not offenders, f'core modules that import {FORBIDDEN}: {offenders}'
+
+
+def module_imports() -> dict[str, set[str]]:
+    """Each module of the packages -> the modules of the packages it imports, at the top or
+    inside a function (a late import only hides a cycle)."""
+    files = {}
+    for package in PACKAGES:
+        for path in (REPO_ROOT / package / package).rglob('*.py'):
+            parts = path.relative_to(REPO_ROOT / package).with_suffix('').parts
+            files['.'.join(parts[:-1] if parts[-1] == '__init__' else parts)] = path
+    graph = {}
+    for name, path in files.items():
+        package = name if path.name == '__init__.py' else name.rpartition('.')[0]
+        imported = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                imported.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ''
+                if node.level:
+                    parent = package.split('.')[:len(package.split('.')) - node.level + 1]
+                    base = '.'.join([*parent, *([node.module] if node.module else [])])
+                # `from package import module` imports the module
+                imported.update(f'{base}.{a.name}' if f'{base}.{a.name}' in files else base
+                                for a in node.names)
+        graph[name] = {m for m in imported if m in files and m != name}
+    return graph
+
+
+def test_no_module_imports_itself_through_others():
+    graph = module_imports()
+    assert 'inflarm_bringup.ros.lockstep' in graph and len(graph) > 100  # the walk found them
+
+    def reaches(start: str) -> set[str]:
+        seen, todo = set(), list(graph[start])
+        while todo:
+            m = todo.pop()
+            if m not in seen:
+                seen.add(m)
+                todo.extend(graph[m])
+        return seen
+
+    cycles = sorted(m for m in graph if m in reaches(m))
+    assert cycles == [], f'modules on an import cycle: {cycles}'

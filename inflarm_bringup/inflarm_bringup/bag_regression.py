@@ -124,16 +124,14 @@ from inflarm_bringup.bag_compare import (
     compare,
     stamp_ns,
 )
+from inflarm_bringup.node_io import NodeIo
 from inflarm_hw.bag import BagMessage, BagWriter, bag_info, deserialize, read_messages
 from inflarm_msgs_json.cli import run_command
 
 __all__ = [
-    'INFRASTRUCTURE_TOPICS',
     'NODES',
-    'NOT_COMPARED',
     'SKIP_START_S',
     'UNSTAMPED_ORDER_NS',
-    'NodeIo',
     'Replay',
     'TimerSchedule',
     'compare',
@@ -156,11 +154,6 @@ NODES: Mapping[str, str] = {
     'elastostatic_ik': 'inflarm_control.nodes.elastostatic_ik:ElastostaticIk',
     'pressure_controller': 'inflarm_control.nodes.pressure_controller:PressureController',
 }
-#: Topics of the ROS plumbing: neither inputs nor outputs of a node under test.
-INFRASTRUCTURE_TOPICS = frozenset({'/clock', '/parameter_events', '/rosout'})
-#: Outputs replayed but not compared: counts since the last report, which depend on where the
-#: reports fell in the recording.
-NOT_COMPARED = frozenset({'/diagnostics'})
 #: An input due at a node less than this before one of its timer firings aligned to record
 #: times [ns] goes to it after the firing: a recorder takes in the messages of different
 #: topics that are ready together in its own order (the README has the offsets measured).
@@ -176,20 +169,6 @@ SKIP_START_S = 1.0
 _MIN_BURSTS = 3
 _LATE = 0.4  # a burst is on the grid within this share of a period after the phase
 _ON_GRID_SHARE = 0.8  # the share of bursts on the grid for a periodic topic
-
-
-@dataclass(frozen=True)
-class NodeIo:
-    """A node's topics, read off the node: ``{topic: msgtype}`` in and out, timer periods."""
-
-    name: str
-    inputs: Mapping[str, str]
-    outputs: Mapping[str, str]
-    timer_periods_ns: tuple[int, ...] = ()
-
-    @property
-    def compared_outputs(self) -> list[str]:
-        return sorted(t for t in self.outputs if t not in NOT_COMPARED)
 
 
 @dataclass(frozen=True)

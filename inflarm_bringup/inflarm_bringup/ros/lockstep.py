@@ -31,7 +31,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 
-from inflarm_bringup.bag_regression import INFRASTRUCTURE_TOPICS, NodeIo
+from inflarm_bringup.node_io import INFRASTRUCTURE_TOPICS, NodeIo
 from inflarm_hw.bag import BagMessage, typestore
 from inflarm_msgs_json.ros.worker import LatestJobWorker
 
