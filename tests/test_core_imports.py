@@ -88,8 +88,9 @@ def module_imports() -> dict[str, set[str]]:
             elif isinstance(node, ast.ImportFrom):
                 base = node.module or ''
                 if node.level:
-                    parent = package.split('.')[:len(package.split('.')) - node.level + 1]
-                    base = '.'.join([*parent, *([node.module] if node.module else [])])
+                    parts = package.split('.')
+                    base = '.'.join([*parts[:len(parts) - node.level + 1],
+                                     *([node.module] if node.module else [])])
                 # `from package import module` imports the module
                 imported.update(f'{base}.{a.name}' if f'{base}.{a.name}' in files else base
                                 for a in node.names)
