@@ -1,7 +1,8 @@
 """Detection and tracking of a yellow ball in BGR images, with a sub-pixel outline.
 
 The vision sensor of ``001_b59ad71c956a1751`` (3.1, 3.3, 4.3.2): an external camera records the
-small yellow ball on the soft arm's end. Pure numpy/OpenCV, no rclpy.
+small yellow ball on the soft arm's end. numpy/OpenCV, the per-ray logic compiled (numba), no
+rclpy.
 
 Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gives the why):
 
@@ -45,6 +46,7 @@ import functools
 import math
 
 import cv2
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -203,6 +205,7 @@ _RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discrimina
 _LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BGR order
 _MIN_LUMA_CONTRAST = 10.0  # smallest step of luma across an edge of the luma pass [grey levels]
 _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures it again
+_JIT = dict(cache=True, nogil=True, error_model='numpy')  # the compiled kernels, cached
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
@@ -257,65 +260,60 @@ def _ball_colour(patch: npt.NDArray[np.uint8],
     return np.median(pixels / norms[:, None], axis=0) * _median(norms)
 
 
-def _crossing(z: npt.NDArray, start: npt.NDArray | float) -> npt.NDArray[np.float64]:
-    """Per row of normalized profiles ``z`` (rising through 0.5) sampled at
-    ``start + k _STEP``, where they cross 0.5: after the samples below 0.5, counted (noise
-    moves that count up and down alike, where a first crossing would come early), by linear
-    interpolation between the two samples around that index. NaN where all samples are on one
-    side."""
-    n, m = z.shape
-    below = (z < 0.5).sum(axis=1)
-    flat = np.arange(0, n * m, m) + np.minimum(np.maximum(below, 1), m - 1)
-    z0, z1 = z.ravel()[flat - 1], z.ravel()[flat]
-    with np.errstate(invalid='ignore', divide='ignore'):
-        # within the two samples (noise can make them both fall on one side of 0.5)
-        position = below - 1 + np.minimum(np.maximum((0.5 - z0) / (z1 - z0), 0.0), 1.0)
-    return np.where((below > 0) & (below < m), start + _STEP * position, np.nan)
+@numba.njit(**_JIT)
+def _crossing(z: npt.NDArray, level: float, start: float) -> float:
+    """Where a profile ``z`` rising through ``level``, sampled at ``start + k _STEP``, crosses
+    it: after the samples below it, counted (noise moves that count up and down alike, where a
+    first crossing would come early), by linear interpolation between the two samples around
+    that index. NaN where all samples are on one side."""
+    below = 0
+    for value in z:
+        if value < level:
+            below += 1
+    if below == 0 or below == len(z):
+        return np.nan
+    z0, z1 = z[below - 1], z[below]
+    share = (level - z0) / (z1 - z0)
+    # within the two samples (noise can make them both fall on one side of the level)
+    if share < 0.0:
+        share = 0.0
+    elif share > 1.0:
+        share = 1.0
+    return start + _STEP * (below - 1 + share)
 
 
-def _normalized(signal: npt.NDArray, lo, hi, min_contrast: float | None = None) -> npt.NDArray:
-    """``(signal - lo) / (hi - lo)`` per row (``lo`` a scalar or per row), NaN where
-    ``hi <= lo``, or with ``min_contrast`` where ``|hi - lo| < min_contrast`` (either
-    polarity)."""
-    lo = np.reshape(lo, (-1, 1))
-    span = np.reshape(hi, (-1, 1)) - lo
-    ok = span > 0.0 if min_contrast is None else np.abs(span) >= min_contrast
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return (signal - lo) / np.where(ok, span, np.nan)
+@numba.njit(**_JIT)
+def _line_at(values: npt.NDArray, weights: npt.NDArray, offset: float) -> float:
+    """The least-squares line through ``values`` (sampled every ``_STEP``, the first
+    ``offset`` samples from a point) evaluated at that point; ``weights`` (0 or 1 per sample)
+    leave samples out. Fewer than 3 samples give their mean."""
+    count = weights.sum()
+    j = np.arange(len(values)) * 1.0
+    per_sample = 1.0 / max(count, 1.0)  # no samples give 0 (unused)
+    mean_j = (weights * j).sum() * per_sample
+    mean_v = (weights * values).sum() * per_sample
+    dj = j - mean_j
+    sjj = (weights * dj * dj).sum()
+    slope = (weights * dj * values).sum() / max(sjj, 1e-12) if count >= 3 else 0.0
+    return mean_v + slope * (-offset - mean_j)
 
 
-def _line_at(values: npt.NDArray, offset, weights: npt.NDArray | None = None) -> npt.NDArray:
-    """Per row, the least-squares line through ``values`` (sampled every ``_STEP``, the first
-    ``offset`` samples from a point, a scalar or per row) evaluated at that point; ``weights``
-    (0 or 1 per sample, optional) leave samples out. Rows of fewer than 3 samples give their
-    mean."""
-    n = values.shape[1]
-    j = np.arange(n, dtype=np.float64)
-    if weights is None:
-        weights = np.ones_like(values)
-    count = weights.sum(axis=1)
-    per_sample = 1.0 / np.maximum(count, 1.0)  # a row without samples gives 0 (unused)
-    mean_j = (weights @ j) * per_sample
-    mean_v = (weights * values).sum(axis=1) * per_sample
-    dj = j[None, :] - mean_j[:, None]
-    sjj = (weights * dj * dj).sum(axis=1)
-    slope = np.where(count >= 3, (weights * dj * values).sum(axis=1) / np.maximum(sjj, 1e-12),
-                     0.0)
-    return mean_v + slope * (-np.asarray(offset, dtype=np.float64) - mean_j)
-
-
-def _circular_mean(values: npt.NDArray, valid: npt.NDArray, k: int = 2) -> npt.NDArray:
-    """Mean of each ray's value with those of its ``k`` neighbours on either side (the rays go
+@numba.njit(**_JIT)
+def _circular_mean(values: npt.NDArray, valid: npt.NDArray[np.bool_]) -> npt.NDArray:
+    """Mean of each ray's value with those of its 2 neighbours on either side (the rays go
     round the ball); invalid rays count as the mean of the valid ones."""
+    n = len(values)
     v = np.where(valid, values, values[valid].mean())
-    return np.convolve(np.concatenate([v[-k:], v, v[:k]]), np.full(2 * k + 1, 1.0 / (2 * k + 1)),
-                       'valid')
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = (v[(i - 2) % n] + v[(i - 1) % n] + v[i] + v[(i + 1) % n] + v[(i + 2) % n]) / 5.0
+    return out
 
 
+@numba.njit(**_JIT)
 def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: float,
-           inside_level: float | None, usable: npt.NDArray[np.int64] | int,
-           sigma: float | None = None,
-           min_contrast: float | None = None) -> tuple[npt.NDArray[np.float64], float]:
+           inside_level: float, usable: npt.NDArray[np.int64], sigma: float,
+           min_contrast: float) -> tuple[npt.NDArray[np.float64], float]:
     """Sub-pixel edge on each ray and the edge's blur (standard deviation [px]).
 
     ``signal`` (n_rays, n_t) is sampled at ``t0 + k _STEP`` from the ray origin, rising from
@@ -323,87 +321,129 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
     are in the image. A first pass takes half-way between the
     mean levels of the inner and outer parts of the search window ``|t - r0| <= half_width``,
     and the blur from the median 25 %-75 % width (1.349 sigma for a Gaussian blur) unless
-    ``sigma`` is given (tracking: the blur measured a few frames ago); with ``min_contrast``
-    the signal may fall as well as rise across the edge, by that much at least. Then the
-    outside level is extrapolated to that edge from a line through the samples just beyond the
-    blurred edge (texture gradients; those in the image, at least a third of the window: a
-    ball near the border), averaged over neighbouring rays, and so is the inside
-    level unless it is known (``inside_level``: 0 in the ball-blind channel, however the ball
-    is shaded), and the edge is found again between those levels. Finally it is moved out by
-    ``sigma^2 / (2 rho)``, by which blur moves the half-way level of a convex outline of
-    radius ``rho`` inwards (the median of a Rice distribution).
+    ``sigma`` is given (not NaN; tracking: the blur measured a few frames ago); with
+    ``min_contrast`` (not NaN) the signal may fall as well as rise across the edge, by that
+    much at least. Then the outside level is extrapolated to that edge from a line through the
+    samples just beyond the blurred edge (texture gradients; those in the image, at least a
+    third of the window: a ball near the border), averaged over neighbouring rays, and so is
+    the inside level unless it is known (``inside_level`` not NaN: 0 in the ball-blind
+    channel, however the ball is shaded), and the edge is found again between those levels.
+    Finally it is moved out by ``sigma^2 / (2 rho)``, by which blur moves the half-way level
+    of a convex outline of radius ``rho`` inwards (the median of a Rice distribution).
     """
     n_rays, n_t = signal.shape
-    # sample index ranges of the search window and of its inner and outer halves
+    known_inside = not math.isnan(inside_level)
+    either_polarity = not math.isnan(min_contrast)
+    # sample index ranges of the search window and of its inner and outer quarters
     lo_k = max(int(math.ceil((r0 - half_width - t0) / _STEP)), 0)
     hi_k = min(int(math.floor((r0 + half_width - t0) / _STEP)) + 1, n_t)
     quarter = max(1, (hi_k - lo_k) // 4)
-    hi = signal[:, hi_k - quarter:hi_k].sum(axis=1) * (1.0 / quarter)
-    lo = (inside_level if inside_level is not None
-          else signal[:, lo_k:lo_k + quarter].sum(axis=1) * (1.0 / quarter))
-    z = _normalized(signal[:, lo_k:hi_k], lo, hi, min_contrast)
-    if sigma is None:
-        found = _crossing(np.concatenate([z, z - 0.25, z + 0.25]), t0 + _STEP * lo_k)
-        edge, q75, q25 = found[:n_rays], found[n_rays:2 * n_rays], found[2 * n_rays:]
-        widths = (q75 - q25)[np.isfinite(q75) & np.isfinite(q25)]
-        sigma = max(_median(widths) / 1.349, 0.3) if len(widths) else 0.7
-    else:
-        edge = _crossing(z, t0 + _STEP * lo_k)
+    start = t0 + _STEP * lo_k
+    measure_blur = math.isnan(sigma)
+    edge = np.full(n_rays, np.nan)
+    widths = np.full(n_rays, np.nan)
+    for i in range(n_rays):
+        hi = signal[i, hi_k - quarter:hi_k].astype(np.float64).sum() / quarter
+        lo = (inside_level if known_inside
+              else signal[i, lo_k:lo_k + quarter].astype(np.float64).sum() / quarter)
+        span = hi - lo
+        if not (abs(span) >= min_contrast if either_polarity else span > 0.0):
+            continue
+        z = (signal[i, lo_k:hi_k] - lo) / span
+        edge[i] = _crossing(z, 0.5, start)
+        if measure_blur:
+            widths[i] = _crossing(z, 0.75, start) - _crossing(z, 0.25, start)
+    if measure_blur:
+        measured = widths[np.isfinite(widths)]
+        sigma = max(np.median(measured) / 1.349, 0.3) if len(measured) else 0.7
     # local levels around the first edge
     length = int(round(_LEVEL_LENGTH / _STEP)) + 1
     gap = int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
-    valid = np.isfinite(edge)
-    k = np.rint((np.where(valid, edge, r0) - t0) / _STEP).astype(np.int64)
-    # the window beyond the edge may be cut by the image's border, to a third of its length
-    valid &= (k >= gap) & (k < usable - gap - length // 3)
+    valid = np.zeros(n_rays, np.bool_)
+    k = np.full(n_rays, gap)
+    for i in range(n_rays):
+        if math.isfinite(edge[i]):
+            ki = int(np.rint((edge[i] - t0) / _STEP))
+            # the window beyond the edge may be cut by the image's border, to a third of its
+            # length
+            if gap <= ki < usable[i] - gap - length // 3:
+                valid[i], k[i] = True, ki
     if not valid.any():
         return np.full(n_rays, np.nan), sigma
-    k = np.where(valid, k, gap)
-    e = t0 + _STEP * k
-    flat = signal.ravel()
-    rows = np.arange(0, n_rays * n_t, n_t)[:, None]
-    at = rows + k[:, None]  # flat index of each ray's edge sample
-    beyond_k = k[:, None] + gap + np.arange(length)
-    beyond = flat[rows + np.minimum(beyond_k, n_t - 1)]
-    beyond_ray = (beyond_k < np.reshape(usable, (-1, 1))).astype(np.float64)
-    # the window before the edge ends a gap inside it, and starts at the ray's first sample
-    # at the earliest
-    offsets = -(gap + length - 1) + np.arange(length)
-    inside_ray = (k[:, None] + offsets[None, :] >= 0).astype(np.float64)
-    before = flat[at + np.maximum(offsets[None, :], -k[:, None])]
-    hi = _circular_mean(_line_at(beyond, gap, beyond_ray), valid)
-    if inside_level is None:
-        lo = _circular_mean(_line_at(before, -(gap + length - 1), inside_ray), valid)
-    # a ray crosses the ball's edge only if it is still inside the ball before it: its own
-    # level there near the inside level (not where background lies on both sides of a
-    # texture edge: the cut of a half disc)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        valid &= (((before * inside_ray).sum(axis=1) / inside_ray.sum(axis=1) - lo) / (hi - lo)
-                  <= _INSIDE_TOLERANCE)
-    edge = _crossing(_normalized(flat[at + np.arange(-gap, gap + 1)], lo, hi, min_contrast),
-                     e - _STEP * gap)
-    edge = np.where(valid, edge, np.nan)
-    return edge + sigma * sigma / (2.0 * edge), sigma
+    beyond_level = np.empty(n_rays)
+    before_level = np.empty(n_rays)
+    before_mean = np.empty(n_rays)
+    values = np.empty(length)
+    weights = np.empty(length)
+    for i in range(n_rays):
+        for j in range(length):
+            at = k[i] + gap + j
+            values[j] = signal[i, min(at, n_t - 1)]
+            weights[j] = 1.0 if at < usable[i] else 0.0
+        beyond_level[i] = _line_at(values, weights, gap)
+        # the window before the edge ends a gap inside it, and starts at the ray's first sample
+        # at the earliest
+        for j in range(length):
+            at = k[i] - (gap + length - 1) + j
+            values[j] = signal[i, max(at, 0)]
+            weights[j] = 1.0 if at >= 0 else 0.0
+        before_level[i] = _line_at(values, weights, -(gap + length - 1))
+        before_mean[i] = (values * weights).sum() / weights.sum()
+    hi_levels = _circular_mean(beyond_level, valid)
+    lo_levels = (np.full(n_rays, inside_level) if known_inside
+                 else _circular_mean(before_level, valid))
+    for i in range(n_rays):
+        edge[i] = np.nan
+        if not valid[i]:
+            continue
+        lo, span = lo_levels[i], hi_levels[i] - lo_levels[i]
+        # a ray crosses the ball's edge only if it is still inside the ball before it: its own
+        # level there near the inside level (not where background lies on both sides of a
+        # texture edge: the cut of a half disc)
+        if not ((before_mean[i] - lo) / span <= _INSIDE_TOLERANCE):
+            continue
+        if not (abs(span) >= min_contrast if either_polarity else span > 0.0):
+            continue
+        z = (signal[i, k[i] - gap:k[i] + gap + 1] - lo) / span
+        found = _crossing(z, 0.5, t0 + _STEP * (k[i] - gap))
+        edge[i] = found + sigma * sigma / (2.0 * found)
+    return edge, sigma
 
 
+@numba.njit(**_JIT)
+def _mean_and_covariance(samples: npt.NDArray) -> tuple[npt.NDArray, npt.NDArray]:
+    """Mean (k,) and covariance (k, k; ``np.cov``'s) of samples (n, k)."""
+    n, k = samples.shape
+    d = samples.astype(np.float64)
+    mean = np.zeros(k)
+    for j in range(k):
+        mean[j] = d[:, j].sum() / n
+        d[:, j] -= mean[j]
+    covariance = np.zeros((k, k))
+    for a in range(k):
+        for b in range(a, k):
+            covariance[a, b] = covariance[b, a] = (d[:, a] * d[:, b]).sum() / max(n - 1, 1)
+    return mean, covariance
+
+
+@numba.njit(**_JIT)
 def _fisher(inside: npt.NDArray, outside: npt.NDArray) -> npt.NDArray[np.float64]:
     """Fisher's discriminant of two sets of samples (n, k): the unit weights ``w`` maximizing
     the separation of ``outside @ w`` above ``inside @ w``."""
-    inside, outside = inside.astype(np.float64), outside.astype(np.float64)
-    mean_in, mean_out = inside.mean(axis=0), outside.mean(axis=0)
-    d_in, d_out = inside - mean_in, outside - mean_out
-    # the two covariances (np.cov's, without its overhead) and the ridge
-    scatter = (d_in.T @ d_in / max(len(d_in) - 1, 1) + d_out.T @ d_out / max(len(d_out) - 1, 1)
-               + _RIDGE * np.eye(inside.shape[1]))
-    w = np.linalg.solve(scatter, mean_out - mean_in)
-    return w / max(np.linalg.norm(w), 1e-12)
+    mean_in, scatter_in = _mean_and_covariance(inside)
+    mean_out, scatter_out = _mean_and_covariance(outside)
+    w = np.linalg.solve(scatter_in + scatter_out + _RIDGE * np.eye(len(mean_in)),
+                        mean_out - mean_in)
+    return w / max(math.sqrt((w * w).sum()), 1e-12)
 
 
+@numba.njit(**_JIT)
 def _separation(inside: npt.NDArray, outside: npt.NDArray, weights: npt.NDArray) -> float:
     """How well a channel separates two sets of BGR samples: the difference of their means
     over the root of the sum of their variances."""
-    a, b = inside @ weights, outside @ weights
-    return float((b.mean() - a.mean()) / math.sqrt(a.var() + b.var() + 1e-6))
+    a = inside.astype(np.float64) @ weights.astype(np.float64)
+    b = outside.astype(np.float64) @ weights.astype(np.float64)
+    return (b.mean() - a.mean()) / math.sqrt(a.var() + b.var() + 1e-6)
 
 
 def _ellipse_distance(fit, origin: npt.NDArray[np.float64],
@@ -424,36 +464,94 @@ def _ellipse_distance(fit, origin: npt.NDArray[np.float64],
     return (-qb + np.sqrt(np.maximum(qb * qb - qa * qc, 0.0))) / qa
 
 
-def _circles_through(a, b, c):
-    """Centres (n, 2) and radii (n,) of the circles through point triples (n, 2) each; NaN for
-    collinear triples."""
-    ab, ac = b - a, c - a
-    d = 2.0 * (ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
-    nb, nc = (ab * ab).sum(axis=1), (ac * ac).sum(axis=1)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        ux = (ac[:, 1] * nb - ab[:, 1] * nc) / d
-        uy = (ab[:, 0] * nc - ac[:, 0] * nb) / d
-    centre = a + np.stack([ux, uy], axis=1)
-    return centre, np.hypot(ux, uy)
-
-
-def _circle_lsq(points):
-    """Least-squares circle (Kasa, then Gauss-Newton on the geometric distance): centre,
-    radius. Normal equations of the points about their mean (3 unknowns, well conditioned
-    there; a tenth of ``lstsq``'s cost on a hundred points)."""
-    mean = points.mean(axis=0)
-    d = points - mean
-    m = np.stack([d[:, 0], d[:, 1], np.ones(len(d))], axis=1)
-    sol = np.linalg.solve(m.T @ m, m.T @ (d * d).sum(axis=1))
-    c = 0.5 * sol[:2]
-    r = math.sqrt(max(sol[2] + c @ c, 1e-12))
+@numba.njit(**_JIT)
+def _circle_lsq(x: npt.NDArray[np.float64],
+                y: npt.NDArray[np.float64]) -> tuple[float, float, float]:
+    """Least-squares circle through points ``(x, y)`` (Kasa, then three Gauss-Newton steps on
+    the geometric distance): centre x, y, radius. Both in coordinates about the points' mean,
+    where the normal equations are well conditioned."""
+    mx, my = x.mean(), y.mean()
+    a = np.zeros((3, 3))
+    b = np.zeros(3)
+    for i in range(len(x)):
+        row = (x[i] - mx, y[i] - my, 1.0)
+        rhs = row[0] * row[0] + row[1] * row[1]
+        for j in range(3):
+            b[j] += row[j] * rhs
+            for k in range(3):
+                a[j, k] += row[j] * row[k]
+    sol = np.linalg.solve(a, b)
+    cx, cy = 0.5 * sol[0], 0.5 * sol[1]
+    r = math.sqrt(max(sol[2] + cx * cx + cy * cy, 1e-12))
     for _ in range(3):
-        off = d - c
-        rho = np.hypot(off[:, 0], off[:, 1])
-        jac = np.concatenate([-off / rho[:, None], -np.ones((len(rho), 1))], axis=1)
-        step = np.linalg.solve(jac.T @ jac, jac.T @ (r - rho))
-        c, r = c + step[:2], r + step[2]
-    return c + mean, float(r)
+        a[:] = 0.0
+        b[:] = 0.0
+        for i in range(len(x)):
+            ox, oy = x[i] - mx - cx, y[i] - my - cy
+            rho = math.hypot(ox, oy)
+            row = (-ox / rho, -oy / rho, -1.0)
+            for j in range(3):
+                b[j] += row[j] * (r - rho)
+                for k in range(3):
+                    a[j, k] += row[j] * row[k]
+        step = np.linalg.solve(a, b)
+        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
+    return cx + mx, cy + my, r
+
+
+@numba.njit(**_JIT)
+def _fit_circle(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64],
+                valid: npt.NDArray[np.bool_], cap: float):
+    """The robust circle through the edge points ``(x, y)`` of the rays (``valid``: those
+    with an edge): ``(ok, cx, cy, r, tolerance, residual, inliers)``.
+
+    The consensus circle first: of the circles through triples of edge points a third of the
+    way round from each other, the one most points lie within ``cap`` of (the first of
+    those). Then twice: least squares through its inliers, the inliers again those within 3
+    robust standard deviations of it (``tolerance``, kept within [`_MIN_TOLERANCE_PX`,
+    ``cap``]). Not ``ok`` where fewer than 8 points support it."""
+    n = len(x)
+    residual = np.full(n, np.inf)
+    inliers = np.zeros(n, np.bool_)
+    best, best_cx, best_cy, best_r = -1, 0.0, 0.0, 0.0
+    for i in range(n):
+        j, k = (i + n // 3) % n, (i + (2 * n) // 3) % n
+        if not (valid[i] and valid[j] and valid[k]):
+            continue
+        abx, aby, acx, acy = x[j] - x[i], y[j] - y[i], x[k] - x[i], y[k] - y[i]
+        d = 2.0 * (abx * acy - aby * acx)
+        nb, nc = abx * abx + aby * aby, acx * acx + acy * acy
+        ux, uy = (acy * nb - aby * nc) / d, (abx * nc - acx * nb) / d
+        cx, cy, r = x[i] + ux, y[i] + uy, math.hypot(ux, uy)
+        if not math.isfinite(r):
+            continue  # collinear
+        support = 0
+        for m in range(n):
+            if valid[m] and abs(math.hypot(x[m] - cx, y[m] - cy) - r) <= cap:
+                support += 1
+        if support > best:
+            best, best_cx, best_cy, best_r = support, cx, cy, r
+    if best < 8:
+        return False, 0.0, 0.0, 0.0, 0.0, residual, inliers
+    for m in range(n):
+        if valid[m]:
+            residual[m] = math.hypot(x[m] - best_cx, y[m] - best_cy) - best_r
+    inliers = np.abs(residual) <= cap
+    cx, cy, r, tolerance = best_cx, best_cy, best_r, cap
+    for _ in range(2):
+        cx, cy, r = _circle_lsq(x[inliers], y[inliers])
+        for m in range(n):
+            if valid[m]:
+                residual[m] = math.hypot(x[m] - cx, y[m] - cy) - r
+        kept = residual[inliers]
+        spread = np.median(np.abs(kept - np.median(kept)))
+        tolerance = min(max(3.0 * 1.4826 * spread, _MIN_TOLERANCE_PX), cap)
+        fitted, inliers = inliers, np.abs(residual) <= tolerance
+        if inliers.sum() < 8:
+            return False, 0.0, 0.0, 0.0, 0.0, residual, inliers
+        if (inliers == fitted).all():
+            break
+    return True, cx, cy, r, tolerance, residual, inliers
 
 
 def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64],
@@ -461,45 +559,19 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
                  radius: float):
     """Robust fit of the outline through the edge points: (fit, inlier mask) or None.
 
-    A consensus circle (circles through triples of edge points a third of the way round from
-    each other, the one most points lie near), then least squares through its points; the
-    inliers are those within 3 robust standard deviations (kept within [0.25, 0.5 + 0.03 r]
-    px). An outline found on 85 % of the rays or more is then fitted by an ellipse (the image
-    of a sphere off the optical axis), a partial one (occluded, or cut by texture) keeps the
-    circle. ``fit`` is OpenCV's ``((cx, cy), (width, height), angle_deg)``."""
+    The robust circle (`_fit_circle`; its points within ``0.5 + 0.03 radius`` px). An outline
+    found on 85 % of the rays or more is then fitted by an ellipse (the image of a sphere off
+    the optical axis), a partial one (occluded, or cut by texture) keeps the circle. ``fit``
+    is OpenCV's ``((cx, cy), (width, height), angle_deg)``."""
     valid = np.isfinite(t)
-    n = len(t)
     if valid.sum() < 8:
         return None
-    cap = 0.5 + 0.03 * radius
-    index = np.arange(n)
-    triples = np.stack([index, (index + n // 3) % n, (index + (2 * n) // 3) % n], axis=1)
-    triples = triples[valid[triples].all(axis=1)]
-    if len(triples) == 0:
+    ok, cx, cy, r, tolerance, residual, inliers = _fit_circle(
+        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]), valid,
+        0.5 + 0.03 * radius)
+    if not ok:
         return None
-    centres, radii = _circles_through(points[triples[:, 0]], points[triples[:, 1]],
-                                      points[triples[:, 2]])
-    pts = points[valid]
-    dist = np.hypot(pts[None, :, 0] - centres[:, None, 0], pts[None, :, 1] - centres[:, None, 1])
-    support = (np.abs(dist - radii[:, None]) <= cap).sum(axis=1)
-    support = np.where(np.isfinite(radii), support, -1)
-    best = int(np.argmax(support))
-    if support[best] < 8:
-        return None
-    residual = np.full(n, np.inf)
-    residual[valid] = np.hypot(*(points[valid] - centres[best]).T) - radii[best]
-    inliers = np.abs(residual) <= cap
-    for _ in range(2):
-        c, r = _circle_lsq(points[inliers])
-        residual[valid] = np.hypot(*(points[valid] - c).T) - r
-        spread = _median(np.abs(residual[inliers] - _median(residual[inliers])))
-        tolerance = min(max(3.0 * 1.4826 * spread, _MIN_TOLERANCE_PX), cap)
-        fitted, inliers = inliers, np.abs(residual) <= tolerance
-        if inliers.sum() < 8:
-            return None
-        if np.array_equal(inliers, fitted):
-            break
-    fit = ((float(c[0]), float(c[1])), (2.0 * r, 2.0 * r), 0.0)
+    fit = ((cx, cy), (2.0 * r, 2.0 * r), 0.0)
     if inliers.mean() >= 0.85:
         ellipse = cv2.fitEllipseDirect(points[inliers].astype(np.float32))
         if all(math.isfinite(x) for x in (*ellipse[0], *ellipse[1])) and min(ellipse[1]) > 0.0:
@@ -539,7 +611,7 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     # those inside from the start (the image is convex and the rays start inside the ball)
     end = t[-1]
     if (end <= center[0] <= w - 1 - end) and (end <= center[1] <= h - 1 - end):
-        in_image = len(t)
+        in_image = np.full(n_rays, len(t))
     else:
         in_image = np.count_nonzero((map_x >= 0.0) & (map_x <= w - 1) & (map_y >= 0.0)
                                     & (map_y <= h - 1), axis=1)
@@ -585,8 +657,11 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
         if separation < _ACCEPT_SEPARATION:
             return None  # nothing around it differs from it clearly: no edge
     signal = samples @ weights
-    edge, sigma = _edges(signal, t0, r0, half_width, inside_level, in_image, sigma,
-                         min_contrast=_MIN_LUMA_CONTRAST if channel == 'luma' else None)
+    edge, sigma = _edges(signal, t0, r0, half_width,
+                         math.nan if inside_level is None else inside_level,
+                         in_image,
+                         math.nan if sigma is None else sigma,
+                         _MIN_LUMA_CONTRAST if channel == 'luma' else math.nan)
     directions = np.stack([cos, sin], axis=1)
     points = center + edge[:, None] * directions
     result = _fit_outline(points, center, directions, edge, r0)

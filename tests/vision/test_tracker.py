@@ -159,3 +159,54 @@ def test_the_whole_frame_search_keeps_the_best_candidates_it_would_rank_without_
                 [(score, tuple(centre)) for score, centre, _ in ranked[:limit]]
             compared += len(ranked) > limit
     assert compared >= 30  # most frames have more blobs than the limit
+
+
+def test_edges_finds_the_outline_of_a_blurred_disc_and_its_blur():
+    # the compiled edge kernel on the exact radial profile of a disc of radius R blurred by a
+    # Gaussian of sigma: the share of the blur kernel outside the disc is a Rice survival
+    # function (scipy's, an independent implementation)
+    from scipy.stats import rice
+
+    from inflarm_vision import tracker
+
+    radius, t0, contrast = 20.0, 8.0, 120.0
+    t = np.arange(t0, 34.0, 0.5)
+    for sigma in (0.5, 1.0, 2.0):
+        profile = contrast * rice.sf(radius, t / sigma, scale=sigma)
+        signal = np.tile(profile, (64, 1)).astype(np.float32)
+        signal += np.random.default_rng(3).normal(0.0, 0.3, signal.shape).astype(np.float32)
+        edge, blur = tracker._edges(signal, t0, 21.0, 6.0, 0.0, np.full(64, len(t)), np.nan,
+                                    np.nan)
+        assert np.all(np.abs(edge - radius) < 0.05), (sigma, edge)
+        assert blur == pytest.approx(sigma, rel=0.15)
+        # the image's border cuts every ray before the levels beyond the edge: no edge
+        edge, _ = tracker._edges(signal, t0, 21.0, 6.0, 0.0, np.full(64, 26), np.nan, np.nan)
+        assert np.isnan(edge).all()
+
+
+def test_the_robust_circle_keeps_the_outline_and_drops_what_hides_it():
+    # points on a circle with noise, a quarter of them moved by an occluder: the inliers are
+    # the points on the circle, and the fit is scipy's geometric least squares through them
+    from scipy.optimize import least_squares
+
+    from inflarm_vision import tracker
+
+    rng = np.random.default_rng(5)
+    phi = np.linspace(0.0, 2.0 * np.pi, 80, endpoint=False)
+    centre, radius = np.array([312.4, 207.9]), 25.0
+    t = radius + rng.normal(0.0, 0.1, 80)
+    hidden = np.arange(80) // 20 == 1
+    t[hidden] -= rng.uniform(3.0, 8.0, hidden.sum())
+    valid = np.ones(80, bool)
+    valid[[3, 47]] = False  # rays without an edge
+    x, y = centre[0] + t * np.cos(phi), centre[1] + t * np.sin(phi)
+    ok, cx, cy, r, tolerance, _, inliers = tracker._fit_circle(x, y, valid, 0.5 + 0.03 * radius)
+    assert ok
+    np.testing.assert_array_equal(inliers, valid & ~hidden)
+    keep = valid & ~hidden
+    reference = least_squares(
+        lambda p: np.hypot(x[keep] - p[0], y[keep] - p[1]) - p[2], [*centre, radius]).x
+    np.testing.assert_allclose([cx, cy, r], reference, atol=1e-6)
+    assert 0.25 <= tolerance <= 0.5 + 0.03 * radius
+    # too few points on any circle: no fit
+    assert not tracker._fit_circle(x, y, np.arange(80) < 7, 1.25)[0]
