@@ -28,7 +28,9 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
    it is high enough, the outline not too elongated, its radius in range, and the rays off it
    one hidden arc at most (`_one_hidden_arc`). The accepted candidate of highest confidence
-   wins (the search stops at one with every ray on its outline).
+   wins (the search stops at one with every ray on its outline). Where none is accepted, each
+   is refined again from 1.3 times its radius (a shaded ball's blob can be half its disc),
+   believed on 80 % of the outline.
 
 `BallTracker` refines the fine outline at the position predicted from the last detections
 with their colour and blur (tracking mode), then searches the candidates around it (`_search`,
@@ -56,6 +58,7 @@ __all__ = [
     'DetectorParams',
     'detect_ball',
     'refine_in_region',
+    'warm_up',
 ]
 
 
@@ -205,6 +208,8 @@ _RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discrimina
 _LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BGR order
 _MIN_LUMA_CONTRAST = 10.0  # smallest step of luma across an edge of the luma pass [grey levels]
 _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures it again
+_RETRY_SCALE = 1.3  # radius of a refused candidate's second refinement, over its blob's
+_RETRY_MIN_CONFIDENCE = 0.8  # share of the outline that second refinement must find
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # the compiled kernels, cached
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
@@ -845,7 +850,7 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
             prior: BallDetection | None = None) -> BallDetection | None:
     """The candidates of ``region`` (decimated as `DetectorParams.decimation` says) refined
     at full resolution: the accepted one of highest confidence (or, with ``near``, the first
-    accepted in order of distance from it)."""
+    accepted in order of distance from it); where none is, the same from a larger radius."""
     h, w = image.shape[:2]
     u0, v0, u1, v1 = (int(x) for x in region)
     u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
@@ -869,19 +874,27 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     if near is not None:
         target = np.asarray(near, dtype=float)
         guesses.sort(key=lambda g: float(np.hypot(*(g[0] - target))))
-    best = None
-    for centre, radius in guesses[:params.max_candidates]:
-        detection = _refine(image, centre, radius, params, margin_px=0.25 * radius + s,
-                            colour=None if prior is None else prior.colour_bgr)
-        if not _accept(detection, params):
-            continue
-        if near is not None:
-            return detection
-        if best is None or detection.confidence > best.confidence:
-            best = detection
-        if best.confidence >= 1.0:
-            break  # every ray on its outline: no later candidate can have more
-    return best
+    colour = None if prior is None else prior.colour_bgr
+    # the blob may be smaller than the ball (its shaded limb falls below the colour
+    # thresholds): where no candidate is accepted, each is refined again from a larger radius,
+    # whose rays can also cross a half disc's straight cut into the texture beyond, so only
+    # most of an outline is believed there
+    for scale, min_confidence in ((1.0, 0.0), (_RETRY_SCALE, _RETRY_MIN_CONFIDENCE)):
+        best = None
+        for centre, radius in guesses[:params.max_candidates]:
+            detection = _refine(image, centre, scale * radius, params,
+                                scale * (0.25 * radius + s), colour)
+            if not (_accept(detection, params) and detection.confidence >= min_confidence):
+                continue
+            if near is not None:
+                return detection
+            if best is None or detection.confidence > best.confidence:
+                best = detection
+            if best.confidence >= 1.0:
+                break  # every ray on its outline: no later candidate can have more
+        if best is not None:
+            return best
+    return None
 
 
 def refine_in_region(bgr_image: npt.ArrayLike, region: tuple[int, int, int, int],
@@ -1011,3 +1024,15 @@ class BallTracker:
         self._previous = None if detection is None or last is None else last.center
         self.last = detection
         return detection
+
+
+def warm_up() -> None:
+    """Compile the detector's kernels, or load them from numba's on-disk cache.
+
+    They compile on their first call (about 20 s on a 2-core machine, once per source change;
+    later processes load them from the cache in ``__pycache__`` in about half a second). Call
+    this where a first frame must not be slow: at set-up, or before a node subscribes."""
+    image = np.full((120, 160, 3), 90, np.uint8)  # a yellow disc on grey
+    cv2.circle(image, (80, 60), 20, (0, 200, 230), cv2.FILLED)
+    if detect_ball(image) is None:
+        raise RuntimeError('warm_up: the detector missed a plain yellow disc')

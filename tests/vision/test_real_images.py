@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from real_scenes import JPEG_QUALITIES, PHOTOS, ball_free_frame, photo, real_case
 
-from inflarm_vision.tracker import detect_ball
+from inflarm_vision import tracker
+from inflarm_vision.tracker import DetectorParams, detect_ball
 
 
 def test_every_photograph_ships_in_an_installed_package_and_is_in_colour():
@@ -85,3 +86,24 @@ def test_a_small_ball_whose_outline_the_first_channel_refuses_is_found_in_the_ne
     detection = detect_ball(case.image)
     assert detection is not None
     assert np.hypot(*(detection.center - case.center)) < 1.0
+
+
+@pytest.mark.parametrize('quality', [None, 75])
+def test_a_ball_whose_colour_blob_is_smaller_than_it_is_found_from_a_larger_radius(
+        quality, monkeypatch):
+    # a held-out scene: a 56 px ball whose shaded limb falls below the colour thresholds, so
+    # its blob covers about half its disc; the outline refined from the blob's radius is
+    # refused, refined again from 1.3 times that radius it is found
+    case = real_case(248, quality)
+    image = cv2.cvtColor(case.image, cv2.COLOR_BGR2HSV)
+    blob = cv2.inRange(image, DetectorParams().hsv_lower, DetectorParams().hsv_upper)
+    v, u = np.mgrid[:blob.shape[0], :blob.shape[1]]
+    disc = np.hypot(u - case.center[0], v - case.center[1]) <= case.radius
+    assert np.count_nonzero(blob[disc]) < 0.6 * np.count_nonzero(disc)
+    detection = detect_ball(case.image)
+    assert detection is not None
+    assert np.hypot(*(detection.center - case.center)) < 1.0
+    # without the second refinement the ball is missed
+    monkeypatch.setattr(tracker, '_RETRY_MIN_CONFIDENCE', 1.01)
+    detection = detect_ball(case.image)
+    assert detection is None or np.hypot(*(detection.center - case.center)) >= 1.0

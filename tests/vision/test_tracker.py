@@ -210,3 +210,12 @@ def test_the_robust_circle_keeps_the_outline_and_drops_what_hides_it():
     assert 0.25 <= tolerance <= 0.5 + 0.03 * radius
     # too few points on any circle: no fit
     assert not tracker._fit_circle(x, y, np.arange(80) < 7, 1.25)[0]
+
+
+def test_warm_up_compiles_the_kernels_the_detector_calls():
+    from inflarm_vision import tracker
+
+    tracker.warm_up()
+    # the numba dispatchers Python calls (the others are compiled into them)
+    for kernel in (tracker._edges, tracker._fit_circle, tracker._fisher, tracker._separation):
+        assert kernel.signatures, kernel.__name__

@@ -58,7 +58,7 @@ from inflarm_msgs_json.ros.problems import InputError
 from inflarm_msgs_json.ros.qos import RELIABLE_QOS, SENSOR_QOS, publisher_events
 from inflarm_msgs_json.ros.spin import spin_node
 from inflarm_vision.pipeline import BallPipeline, settings_from_parameters
-from inflarm_vision.tracker import DetectorParams
+from inflarm_vision.tracker import DetectorParams, warm_up
 
 TRANSPORTS = {
     'raw': (Image, 'camera/image_raw', image_to_bgr),
@@ -131,6 +131,7 @@ class BallTrackerNode(GuardedCallbacks, Node):
                              f"'{self.params['transport']}'")
         image_type, self.image_topic, self.to_bgr = TRANSPORTS[self.params['transport']]
         self.pipeline = BallPipeline(settings_from_parameters(self.params))
+        warm_up()  # the compiled kernels before the first image, not in its callback
         self.camera: PinholeCamera | None = None
         self.window = _Window()
         self.point_pub = self.create_publisher(
