@@ -473,8 +473,8 @@ def _ellipse_distance(fit, origin: npt.NDArray[np.float64],
 def _circle_lsq(x: npt.NDArray[np.float64],
                 y: npt.NDArray[np.float64]) -> tuple[float, float, float]:
     """Least-squares circle through points ``(x, y)`` (Kasa, then three Gauss-Newton steps on
-    the geometric distance): centre x, y, radius. Both in coordinates about the points' mean,
-    where the normal equations are well conditioned."""
+    the geometric distance): centre x, y, radius. The normal equations are formed about the
+    points' mean, where they are well conditioned."""
     mx, my = x.mean(), y.mean()
     a = np.zeros((3, 3))
     b = np.zeros(3)
