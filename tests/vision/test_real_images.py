@@ -95,8 +95,7 @@ def test_a_ball_whose_colour_blob_is_smaller_than_it_is_found_from_a_larger_radi
     # its blob covers about half its disc; the outline refined from the blob's radius is
     # refused, refined again from 1.3 times that radius it is found
     case = real_case(248, quality)
-    image = cv2.cvtColor(case.image, cv2.COLOR_BGR2HSV)
-    blob = cv2.inRange(image, DetectorParams().hsv_lower, DetectorParams().hsv_upper)
+    blob = tracker._threshold(case.image, DetectorParams())  # the detector's colour mask
     v, u = np.mgrid[:blob.shape[0], :blob.shape[1]]
     disc = np.hypot(u - case.center[0], v - case.center[1]) <= case.radius
     assert np.count_nonzero(blob[disc]) < 0.6 * np.count_nonzero(disc)
