@@ -31,6 +31,11 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    wins (the search stops at one with every ray on its outline). Where none is accepted, each
    is refined again from 1.3 times its radius (a shaded ball's blob can be half its disc),
    believed on 80 % of the outline.
+4. **Small balls** (under 8 px): where their rays give no accepted outline (a blur of a third
+   of the radius leaves too few samples for an edge's levels), the whole blurred disc is
+   fitted to the ball-blind channel around the candidate (`_fit_disc`: a blurred ellipse on a
+   sloping background, robust Levenberg-Marquardt), believed where 80 % of the rays from its
+   centre agree with it.
 
 `BallTracker` refines the fine outline at the position predicted from the last detections
 with their colour and blur (tracking mode), then searches the candidates around it (`_search`,
@@ -211,6 +216,12 @@ _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures
 _RETRY_SCALE = 1.3  # radius of a refused candidate's second refinement, over its blob's
 _RETRY_MIN_CONFIDENCE = 0.8  # share of the outline that second refinement must find
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # the compiled kernels, cached
+# a small ball's whole blurred disc (`_fit_disc`), where its rays fail
+_DISC_MIN_CONTRAST = 12.0  # smallest step of the ball-blind channel at its edge [grey levels]
+_DISC_MAX_BLUR = 0.4  # largest blur over radius (a blur near the radius rounds any blob)
+_DISC_PROFILE_TOLERANCE = 0.2  # largest RMS misfit of a ray's profile, over the edge's step
+_DISC_EDGE_TOLERANCE_PX = 1.0  # largest distance of a ray's half-level from the model's [px]
+_DISC_MIN_CONFIDENCE = 0.8  # share of the rays that must agree with the fitted disc
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
@@ -585,6 +596,215 @@ def _fit_outline(points: npt.NDArray[np.float64], origin: npt.NDArray[np.float64
     return fit, inliers
 
 
+# -- a small ball: its whole blurred disc --------------------------------------------------------
+
+@numba.njit(**_JIT)
+def _blurred_disc(p: npt.NDArray[np.float64], dx: npt.NDArray[np.float64],
+                  dy: npt.NDArray[np.float64],
+                  jacobian: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The ball-blind channel of a blurred ball at pixel offsets ``(dx, dy)`` and, in
+    ``jacobian`` (n, 9), its derivatives by the parameters ``p``: centre offset ``cx, cy``,
+    radius ``rho``, blur ``s`` [px], background level ``b0 + b1 dx + b2 dy`` and ellipse
+    ``e1, e2`` (the outline is ``|M (d - c)| = rho``, ``M = I + [[e1, e2], [e2, -e1]]``).
+
+    The channel is 0 inside (however the ball is shaded) and the background outside, across
+    the edge the normal CDF of the distance from it over ``s``; the edge moved in by
+    ``s^2 / (2 rho)``, as blur moves a convex outline's half level (see `_edges`)."""
+    cx, cy, rho, s, b0, b1, b2, e1, e2 = p
+    out = np.empty(len(dx))
+    for i in range(len(dx)):
+        ux, uy = dx[i] - cx, dy[i] - cy
+        w0, w1 = (1.0 + e1) * ux + e2 * uy, e2 * ux + (1.0 - e1) * uy
+        r = max(math.hypot(w0, w1), 1e-9)
+        u = (r - rho) / s + s / (2.0 * rho)
+        cdf = 0.5 * math.erfc(-u / math.sqrt(2.0))
+        level = b0 + b1 * dx[i] + b2 * dy[i]
+        out[i] = level * cdf
+        g = level * math.exp(-0.5 * u * u) / math.sqrt(2.0 * math.pi) / s  # d out / d r
+        jacobian[i, 0] = -g * ((1.0 + e1) * w0 + e2 * w1) / r
+        jacobian[i, 1] = -g * (e2 * w0 + (1.0 - e1) * w1) / r
+        jacobian[i, 2] = -g * (1.0 + s * s / (2.0 * rho * rho))
+        jacobian[i, 3] = g * (s / (2.0 * rho) - (r - rho) / s)
+        jacobian[i, 4] = cdf
+        jacobian[i, 5] = dx[i] * cdf
+        jacobian[i, 6] = dy[i] * cdf
+        jacobian[i, 7] = g * (w0 * ux - w1 * uy) / r
+        jacobian[i, 8] = g * (w0 * uy + w1 * ux) / r
+    return out
+
+
+@numba.njit(**_JIT)
+def _robust_cost(residual: npt.NDArray[np.float64], scale: float) -> float:
+    """The soft-L1 cost (``2 (sqrt(1 + (r / scale)^2) - 1)``, summed): highlights and
+    occluders are outliers."""
+    z = residual / scale
+    return (2.0 * (np.sqrt(1.0 + z * z) - 1.0)).sum()
+
+
+@numba.njit(**_JIT)
+def _fit_blurred_disc(signal: npt.NDArray[np.float64], dx: npt.NDArray[np.float64],
+                      dy: npt.NDArray[np.float64], p0: npt.NDArray[np.float64],
+                      lower: npt.NDArray[np.float64], upper: npt.NDArray[np.float64],
+                      scale: float) -> npt.NDArray[np.float64]:
+    """`_blurred_disc`'s parameters fitted to ``signal`` at ``(dx, dy)`` from ``p0``, within
+    ``[lower, upper]``: Levenberg-Marquardt on the soft-L1 cost of residuals of ``scale``
+    (iteratively reweighted), steps clipped to the bounds."""
+    n = len(signal)
+    p = p0.copy()
+    jacobian = np.empty((n, 9))
+    trial_jacobian = np.empty((n, 9))
+    residual = _blurred_disc(p, dx, dy, jacobian) - signal
+    cost = _robust_cost(residual, scale)
+    damping = 1e-3
+    for _ in range(30):
+        weights = 1.0 / np.sqrt(1.0 + (residual / scale) ** 2)
+        weighted = jacobian * weights[:, None]
+        normal = weighted.T @ jacobian
+        gradient = weighted.T @ residual
+        improved = False
+        for _ in range(8):
+            damped = normal + damping * np.diag(np.diag(normal) + 1e-9)
+            trial = np.minimum(np.maximum(p - np.linalg.solve(damped, gradient), lower), upper)
+            trial_residual = _blurred_disc(trial, dx, dy, trial_jacobian) - signal
+            trial_cost = _robust_cost(trial_residual, scale)
+            if trial_cost < cost:
+                improved = True
+                break
+            damping *= 10.0
+        if not improved:
+            break
+        converged = cost - trial_cost <= 1e-4 * cost
+        p, residual, cost = trial, trial_residual, trial_cost
+        jacobian, trial_jacobian = trial_jacobian, jacobian
+        damping = max(0.1 * damping, 1e-9)
+        if converged:
+            break
+    return p
+
+
+def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
+              ball_bgr: npt.NDArray[np.float64] | None,
+              params: DetectorParams) -> BallDetection | None:
+    """A small ball's outline from its whole disc: `_blurred_disc` fitted to the ball-blind
+    channel of the pixels within ``1.5 r0 + 6`` px of ``center`` (`_fit_blurred_disc`).
+
+    Under a blur of a third of its radius, a ball of a few pixels has too few samples along
+    its rays for their edges' levels (`_edges`); its disc as a whole still has hundreds. A ray
+    from the fitted centre agrees with the fit where its profile is within
+    `_DISC_PROFILE_TOLERANCE` of the edge's step of the model's and its half level within
+    `_DISC_EDGE_TOLERANCE_PX` of the model's (a corner of another shape is off both); the
+    fit is believed where `_DISC_MIN_CONFIDENCE` of them agree, the rays off it are one hidden
+    arc, the step is at least `_DISC_MIN_CONTRAST` and the blur at most `_DISC_MAX_BLUR` of the
+    radius. None otherwise, or if the colour or the separation of the ball from its surround
+    fails as in `_refine_at`."""
+    if not _coloured(ball_bgr, params):
+        return None
+    h, w = image.shape[:2]
+    half = int(math.ceil(1.5 * r0 + 6.0))
+    cu, cv = int(round(center[0])), int(round(center[1]))
+    u0, v0 = max(cu - half, 0), max(cv - half, 0)
+    u1, v1 = min(cu + half + 1, w), min(cv + half + 1, h)
+    pixels = image[v0:v1, u0:u1].reshape(-1, 3).astype(np.float32)
+    vs, us = np.mgrid[v0:v1, u0:u1]
+    dx = (us.ravel() - center[0]).astype(np.float64)
+    dy = (vs.ravel() - center[1]).astype(np.float64)
+    r = np.hypot(dx, dy)
+    around = r >= r0 + 4.0
+    outside = pixels[around]
+    inside = _own_samples(pixels[r <= 0.7 * r0], ball_bgr)
+    if inside is None or len(outside) < 16:
+        return None
+    weights, separation = _blind_channel(inside, outside, ball_bgr)
+    if separation < _ACCEPT_SEPARATION:
+        return None
+    signal = (pixels @ weights).astype(np.float64)
+    level = _median(signal[around])
+    if level < _DISC_MIN_CONTRAST:
+        return None
+    reach = 0.5 * r0 + 2.0
+    p = _fit_blurred_disc(
+        signal, dx, dy, np.array([0.0, 0.0, r0, 1.0, level, 0.0, 0.0, 0.0, 0.0]),
+        np.array([-reach, -reach, 0.5 * r0, 0.3, 0.0, -np.inf, -np.inf, -0.4, -0.4]),
+        np.array([reach, reach, 1.8 * r0, max(r0, 1.0), np.inf, np.inf, np.inf, 0.4, 0.4]),
+        0.1 * level)
+    cx, cy, rho, s, b0, b1, b2, e1, e2 = (float(x) for x in p)
+    if b0 < _DISC_MIN_CONTRAST or s > _DISC_MAX_BLUR * rho:
+        return None
+    # the rays from the fitted centre, across the fitted edge
+    n_rays = 32
+    cos, sin = _ray_directions(n_rays)
+    t = np.arange(max(rho - 2.0 * s - 1.0, 0.0), rho + 2.0 * s + 1.0 + 1e-9, _STEP)
+    ray_dx = (cx + np.outer(cos, t)).ravel()
+    ray_dy = (cy + np.outer(sin, t)).ravel()
+    samples = cv2.remap(image, (center[0] + ray_dx).reshape(n_rays, -1).astype(np.float32),
+                        (center[1] + ray_dy).reshape(n_rays, -1).astype(np.float32),
+                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    profile = (samples.astype(np.float32) @ weights).astype(np.float64)
+    model = _blurred_disc(p, ray_dx, ray_dy, np.empty((len(ray_dx), 9))).reshape(n_rays, -1)
+    step = b0 + b1 * ray_dx.reshape(n_rays, -1)[:, -1] + b2 * ray_dy.reshape(n_rays, -1)[:, -1]
+    inliers = np.zeros(n_rays, np.bool_)
+    for i in range(n_rays):
+        if step[i] <= 0.0:
+            continue
+        misfit = math.sqrt(((profile[i] - model[i]) ** 2).mean())
+        half_level = _crossing(profile[i] / step[i], 0.5, t[0])
+        model_half_level = _crossing(model[i] / step[i], 0.5, t[0])
+        inliers[i] = (misfit <= _DISC_PROFILE_TOLERANCE * step[i]
+                      and abs(half_level - model_half_level) <= _DISC_EDGE_TOLERANCE_PX)
+    if inliers.mean() < _DISC_MIN_CONFIDENCE or not _one_hidden_arc(inliers,
+                                                                     _MAX_HIDDEN_ARC_SMALL):
+        return None
+    # M's eigenvalues are 1 +- e: semi-axes rho / (1 -+ e), the major one along the
+    # eigenvector of 1 - e
+    e = math.hypot(e1, e2)
+    major = 0.5 * math.atan2(e2, e1) + 0.5 * math.pi
+    major = (major + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+    fitted = np.array([center[0] + cx, center[1] + cy])
+    directions = np.stack([cos, sin], axis=1)[inliers]
+    stretch = np.hypot((1.0 + e1) * directions[:, 0] + e2 * directions[:, 1],
+                       e2 * directions[:, 0] + (1.0 - e1) * directions[:, 1])
+    return BallDetection(center=fitted, radius=rho / math.sqrt(1.0 - e * e),
+                         confidence=float(inliers.mean()),
+                         axes=np.array([rho / (1.0 - e), rho / (1.0 + e)]), angle=major,
+                         edge_points=fitted + (rho / stretch)[:, None] * directions,
+                         colour_bgr=ball_bgr, blur_px=s)
+
+
+def _coloured(ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams) -> bool:
+    """Whether a measured ball colour is one (known, and far enough from grey)."""
+    return ball_bgr is not None and bool(
+        np.linalg.norm(ball_bgr - ball_bgr.mean()) >= max(params.min_chroma, 1.0))
+
+
+def _own_samples(inside: npt.NDArray[np.float32],
+                 ball_bgr: npt.NDArray[np.float64]) -> npt.NDArray[np.float32] | None:
+    """The BGR samples (n, 3) from within an outline that are of the ball's colour (not a
+    highlight, not background where the ball is hidden or where the candidate is no ball);
+    None unless the samples carry, on average, half the ball's chroma (a dark or grey round
+    thing is no ball) and 8 of them are of its colour."""
+    _, chroma = _channels(ball_bgr)
+    if not (inside @ chroma).mean() > 0.5 * float(np.dot(ball_bgr, chroma)):
+        return None
+    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
+    own = inside @ unit > _SAME_COLOUR * np.sqrt(np.einsum('ij,ij->i', inside, inside))
+    return inside[own] if own.sum() >= 8 else None
+
+
+def _blind_channel(inside: npt.NDArray[np.float32], outside: npt.NDArray[np.float32],
+                   ball_bgr: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float32], float]:
+    """Of the channels blind to the ball's colour (the plane orthogonal to it in BGR: 0 inside
+    however the ball is shaded), the one that best separates the ball's own samples from
+    those around it (Fisher's discriminant in that plane): its BGR weights and separation."""
+    blind, _ = _channels(ball_bgr)
+    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
+    # unit and blind are orthogonal unit vectors: their cross product is one too
+    other = (unit[1] * blind[2] - unit[2] * blind[1], unit[2] * blind[0] - unit[0] * blind[2],
+             unit[0] * blind[1] - unit[1] * blind[0])
+    plane = np.array([blind, other])  # (2, 3)
+    weights = (_fisher(inside @ plane.T, outside @ plane.T) @ plane).astype(np.float32)
+    return weights, _separation(inside, outside, weights)
+
+
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
                ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
                margin_px: float = 0.0, sigma: float | None = None,
@@ -599,10 +819,8 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     ball is brighter than its surround on one side, darker on another). None if the colour is
     unknown or too grey, the inside of the outline is not of that colour, or nothing around the
     ball differs from it clearly."""
-    if ball_bgr is None or np.linalg.norm(ball_bgr - ball_bgr.mean()) < max(params.min_chroma,
-                                                                             1.0):
+    if not _coloured(ball_bgr, params):
         return None
-    blind, chroma = _channels(ball_bgr)
     n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
     cos, sin = _ray_directions(n_rays)
     half_width = 0.15 * r0 + 3.0 + margin_px
@@ -622,39 +840,21 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
                                     & (map_y <= h - 1), axis=1)
     samples = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
                         borderMode=cv2.BORDER_REPLICATE)
-    # inside, the chroma of the ball's colour (a dark or grey round thing is no ball)
-    strength = float(np.dot(ball_bgr, chroma))
-    inner = max(1, int((r0 - half_width - t0) / _STEP))
-    if not (samples[:, :inner] @ chroma).mean() > 0.5 * strength:
-        return None
-    # the edge's signal: of the channels blind to the ball's colour (the plane orthogonal to
-    # it in BGR: 0 inside however the ball is shaded), the one that best separates the ball's
-    # samples from those around it (Fisher's discriminant in that plane); where nothing
-    # around differs from the ball but in brightness (a dark surround), the best channel of
-    # all, with the inside level measured
+    # the edge's signal: the ball-blind channel (`_blind_channel`); where nothing around
+    # differs from the ball but in brightness (a dark surround), the best channel of all, with
+    # the inside level measured
     n_t = len(t)
+    inner = max(1, int((r0 - half_width - t0) / _STEP))
     outside_k = min(int((r0 + half_width - t0) / _STEP), n_t - 1)
-    inside = samples[:, :inner].reshape(-1, 3).astype(np.float32)
-    outside = samples[:, outside_k:].reshape(-1, 3).astype(np.float32)
-    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
-    # the ball's own samples: of its colour (not a highlight, not background where the ball is
-    # hidden or where the candidate is no ball)
-    along = inside @ unit
-    own = along > _SAME_COLOUR * np.sqrt(np.einsum('ij,ij->i', inside, inside))
-    if own.sum() < 8:
+    inside = _own_samples(samples[:, :inner].reshape(-1, 3).astype(np.float32), ball_bgr)
+    if inside is None:
         return None
-    inside = inside[own]
+    outside = samples[:, outside_k:].reshape(-1, 3).astype(np.float32)
     if channel == 'luma':
         weights, inside_level = _LUMA, None
     else:
-        # unit and blind are orthogonal unit vectors: their cross product is one too
-        other = (unit[1] * blind[2] - unit[2] * blind[1], unit[2] * blind[0] - unit[0] * blind[2],
-                 unit[0] * blind[1] - unit[1] * blind[0])
-        plane = np.array([blind, other])  # (2, 3)
-        w2 = _fisher(inside @ plane.T, outside @ plane.T)
-        weights = (w2 @ plane).astype(np.float32)
+        weights, separation = _blind_channel(inside, outside, ball_bgr)
         inside_level = 0.0
-        separation = _separation(inside, outside, weights)
         if channel == 'coarse' or separation < _MIN_SEPARATION:
             full = _fisher(inside, outside).astype(np.float32)
             if (full_separation := _separation(inside, outside, full)) > separation:
@@ -733,17 +933,21 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
     the disc when not given)."""
     if colour is None:
         colour = _disc_colour(image, center, r0, params)
-    for channel in (('coarse', 'blind', 'luma') if r0 >= _COARSE_MIN_RADIUS_PX
-                    else ('blind', 'luma')):
+    small = r0 < _COARSE_MIN_RADIUS_PX
+    fine = None
+    for channel in ('blind', 'luma') if small else ('coarse', 'blind', 'luma'):
         first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
                            channel=channel)
         if first is not None:
+            # the outline measured again with rays from its own centre: from an off-centre
+            # start the rays meet a part of the outline more often than its share of it
+            fine = _fine(image, first.center, first.radius, colour, params, sigma=sigma)
             break
-    else:
-        return None
-    # the outline measured again with rays from its own centre: from an off-centre start the
-    # rays meet a part of the outline more often than its share of it
-    return _fine(image, first.center, first.radius, colour, params, sigma=sigma)
+    if small and not _accept(fine, params):
+        disc = _fit_disc(image, center, r0, colour, params)
+        if disc is not None and (fine is None or disc.confidence > fine.confidence):
+            return disc
+    return fine
 
 
 def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
@@ -1036,3 +1240,9 @@ def warm_up() -> None:
     cv2.circle(image, (80, 60), 20, (0, 200, 230), cv2.FILLED)
     if detect_ball(image) is None:
         raise RuntimeError('warm_up: the detector missed a plain yellow disc')
+    # the small balls' disc fit runs only where their rays fail
+    v, u = np.mgrid[-8:9, -8:9]
+    dx, dy = u.ravel().astype(np.float64), v.ravel().astype(np.float64)
+    disc = np.array([0.0, 0.0, 4.0, 1.0, 50.0, 0.0, 0.0, 0.0, 0.0])
+    signal = _blurred_disc(disc, dx, dy, np.empty((len(dx), 9)))
+    _fit_blurred_disc(signal, dx, dy, disc, disc - 1.0, disc + 1.0, 5.0)

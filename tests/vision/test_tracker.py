@@ -212,10 +212,44 @@ def test_the_robust_circle_keeps_the_outline_and_drops_what_hides_it():
     assert not tracker._fit_circle(x, y, np.arange(80) < 7, 1.25)[0]
 
 
+def test_the_blurred_disc_model_and_its_robust_fit_match_scipy():
+    # the model's Jacobian against finite differences, and the compiled robust fit of a small
+    # blurred ellipse (noise, a highlight, a sloping background) against scipy's
+    # least_squares on the same model and soft-L1 cost (an independent optimizer)
+    from scipy.optimize import least_squares
+
+    from inflarm_vision import tracker
+
+    v, u = np.mgrid[-14:15, -14:15]
+    dx, dy = u.ravel().astype(float), v.ravel().astype(float)
+    truth = np.array([0.8, -0.6, 5.2, 1.5, 60.0, 0.8, -0.5, 0.05, -0.03])
+    jacobian = np.empty((len(dx), 9))
+    clean = tracker._blurred_disc(truth, dx, dy, jacobian)
+    for k in range(9):
+        h = np.zeros(9)
+        h[k] = 1e-6
+        numeric = (tracker._blurred_disc(truth + h, dx, dy, np.empty((len(dx), 9)))
+                   - tracker._blurred_disc(truth - h, dx, dy, np.empty((len(dx), 9)))) / 2e-6
+        np.testing.assert_allclose(jacobian[:, k], numeric, atol=1e-5 * np.abs(numeric).max())
+    rng = np.random.default_rng(11)
+    signal = clean + rng.normal(0.0, 2.0, clean.shape)
+    signal[np.hypot(dx - 0.0, dy + 2.0) < 1.5] += 80.0  # a highlight: white reads high
+    p0 = np.array([0.0, 0.0, 6.0, 1.0, 55.0, 0.0, 0.0, 0.0, 0.0])
+    lower = np.array([-5.0, -5.0, 3.0, 0.3, 0.0, -np.inf, -np.inf, -0.4, -0.4])
+    upper = np.array([5.0, 5.0, 10.8, 6.0, np.inf, np.inf, np.inf, 0.4, 0.4])
+    fitted = tracker._fit_blurred_disc(signal, dx, dy, p0, lower, upper, 5.5)
+    reference = least_squares(
+        lambda p: tracker._blurred_disc(p, dx, dy, np.empty((len(dx), 9))) - signal, p0,
+        bounds=(lower, upper), loss='soft_l1', f_scale=5.5, xtol=1e-12, ftol=1e-12).x
+    np.testing.assert_allclose(fitted[:4], reference[:4], atol=5e-3)  # centre, radius, blur
+    np.testing.assert_allclose(fitted[:3], truth[:3], atol=0.1)
+
+
 def test_warm_up_compiles_the_kernels_the_detector_calls():
     from inflarm_vision import tracker
 
     tracker.warm_up()
     # the numba dispatchers Python calls (the others are compiled into them)
-    for kernel in (tracker._edges, tracker._fit_circle, tracker._fisher, tracker._separation):
+    for kernel in (tracker._edges, tracker._fit_circle, tracker._fisher, tracker._separation,
+                   tracker._blurred_disc, tracker._fit_blurred_disc):
         assert kernel.signatures, kernel.__name__
