@@ -1241,8 +1241,8 @@ def warm_up() -> None:
     if detect_ball(image) is None:
         raise RuntimeError('warm_up: the detector missed a plain yellow disc')
     # the small balls' disc fit runs only where their rays fail
-    v, u = np.mgrid[-8:9, -8:9]
-    dx, dy = u.ravel().astype(np.float64), v.ravel().astype(np.float64)
-    disc = np.array([0.0, 0.0, 4.0, 1.0, 50.0, 0.0, 0.0, 0.0, 0.0])
-    signal = _blurred_disc(disc, dx, dy, np.empty((len(dx), 9)))
-    _fit_blurred_disc(signal, dx, dy, disc, disc - 1.0, disc + 1.0, 5.0)
+    small = cv2.GaussianBlur(cv2.circle(np.full((40, 40, 3), 90, np.uint8), (20, 20), 5,
+                                        (0, 200, 230), cv2.FILLED), (0, 0), 1.5)
+    if _fit_disc(small, np.array([20.0, 20.0]), 5.0, np.array([0.0, 200.0, 230.0]),
+                 DetectorParams()) is None:
+        raise RuntimeError('warm_up: the disc fit missed a small blurred yellow disc')

@@ -251,5 +251,5 @@ def test_warm_up_compiles_the_kernels_the_detector_calls():
     tracker.warm_up()
     # the numba dispatchers Python calls (the others are compiled into them)
     for kernel in (tracker._edges, tracker._fit_circle, tracker._fisher, tracker._separation,
-                   tracker._blurred_disc, tracker._fit_blurred_disc):
+                   tracker._blurred_disc, tracker._fit_blurred_disc, tracker._crossing):
         assert kernel.signatures, kernel.__name__
