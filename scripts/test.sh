@@ -5,8 +5,8 @@
 #
 # `scripts/test.sh --fast [pytest args]`: the fast lane, the same with `-m 'not system'`: the
 # cores and the in-process node tests, without the tests marked `system` (those that start
-# processes: node executables over DDS, colcon, Chromium; tests/conftest.py marks every test
-# that uses the node_processes fixture). About 4 minutes instead of the full suite's fifteen;
+# processes: node executables over DDS, colcon, Dask, Chromium; tests/conftest.py marks every
+# test that uses the node_processes fixture). About 3 minutes instead of the full suite's fifteen;
 # not a substitute for the full run before a merge.
 set -euo pipefail
 cd "$(dirname "$0")/.."

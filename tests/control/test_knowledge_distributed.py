@@ -28,6 +28,8 @@ from inflarm_control.knowledge import (
 )
 from ros_harness import wait_until
 
+pytestmark = pytest.mark.system  # a Dask scheduler and workers in processes of their own
+
 # 96 points in 12 blocks of 8, 10 trials each: about 0.15 s per block on an idle core.
 GRID = KnowledgeGrid(origin=(0.05, 0.06, 0.70), spacing=0.01, shape=(4, 4, 6))
 BLOCK = 8

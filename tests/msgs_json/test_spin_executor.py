@@ -12,6 +12,8 @@ import pytest
 
 from inflarm_msgs_json.ros.spin import DEFAULT_EXECUTOR, EXECUTORS, executor_kind
 
+pytestmark = pytest.mark.system  # node entry points in processes of their own
+
 # A node that echoes every `chatter` message on `echo` and counts its timer on `ticks`.
 ECHO_NODE = """
 from rclpy.node import Node
