@@ -742,15 +742,12 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
     profile = (samples.astype(np.float32) @ weights).astype(np.float64)
     model = _blurred_disc(p, ray_dx, ray_dy, np.empty((len(ray_dx), 9))).reshape(n_rays, -1)
     step = b0 + b1 * ray_dx.reshape(n_rays, -1)[:, -1] + b2 * ray_dy.reshape(n_rays, -1)[:, -1]
-    inliers = np.zeros(n_rays, np.bool_)
-    for i in range(n_rays):
-        if step[i] <= 0.0:
-            continue
-        misfit = math.sqrt(((profile[i] - model[i]) ** 2).mean())
+    misfit = np.sqrt(((profile - model) ** 2).mean(axis=1))
+    inliers = (step > 0.0) & (misfit <= _DISC_PROFILE_TOLERANCE * step)
+    for i in np.nonzero(inliers)[0]:
         half_level = _crossing(profile[i] / step[i], 0.5, t[0])
         model_half_level = _crossing(model[i] / step[i], 0.5, t[0])
-        inliers[i] = (misfit <= _DISC_PROFILE_TOLERANCE * step[i]
-                      and abs(half_level - model_half_level) <= _DISC_EDGE_TOLERANCE_PX)
+        inliers[i] = abs(half_level - model_half_level) <= _DISC_EDGE_TOLERANCE_PX
     if inliers.mean() < _DISC_MIN_CONFIDENCE or not _one_hidden_arc(inliers,
                                                                      _MAX_HIDDEN_ARC_SMALL):
         return None
@@ -760,13 +757,13 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
     major = 0.5 * math.atan2(e2, e1) + 0.5 * math.pi
     major = (major + 0.5 * math.pi) % math.pi - 0.5 * math.pi
     fitted = np.array([center[0] + cx, center[1] + cy])
+    a, b = rho / (1.0 - e), rho / (1.0 + e)
     directions = np.stack([cos, sin], axis=1)[inliers]
-    stretch = np.hypot((1.0 + e1) * directions[:, 0] + e2 * directions[:, 1],
-                       e2 * directions[:, 0] + (1.0 - e1) * directions[:, 1])
-    return BallDetection(center=fitted, radius=rho / math.sqrt(1.0 - e * e),
-                         confidence=float(inliers.mean()),
-                         axes=np.array([rho / (1.0 - e), rho / (1.0 + e)]), angle=major,
-                         edge_points=fitted + (rho / stretch)[:, None] * directions,
+    distance = _ellipse_distance(
+        ((fitted[0], fitted[1]), (2.0 * a, 2.0 * b), math.degrees(major)), fitted, directions)
+    return BallDetection(center=fitted, radius=math.sqrt(a * b),
+                         confidence=float(inliers.mean()), axes=np.array([a, b]), angle=major,
+                         edge_points=fitted + distance[:, None] * directions,
                          colour_bgr=ball_bgr, blur_px=s)
 
 
