@@ -214,7 +214,8 @@ _LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BG
 _MIN_LUMA_CONTRAST = 10.0  # smallest step of luma across an edge of the luma pass [grey levels]
 _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures it again
 _RETRY_SCALE = 1.3  # radius of a refused candidate's second refinement, over its blob's
-_RETRY_MIN_CONFIDENCE = 0.8  # share of the outline that second refinement must find
+_RETRY_MIN_CONFIDENCE = 0.8  # share of the outline that second refinement must find ...
+_RETRY_MIN_ARC_PX = 100.0  # ... or this much of it (80 % of a 20 px ball's), if >= min_confidence
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # the compiled kernels, cached
 # a small ball's whole blurred disc (`_fit_disc`), where its rays fail
 _DISC_MIN_CONTRAST = 12.0  # smallest step of the ball-blind channel at its edge [grey levels]
@@ -1030,6 +1031,14 @@ def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], 
     return found if limit is None else found[:limit]
 
 
+def _retry_min_confidence(radius: float) -> float:
+    """Share of its outline a refused candidate's second refinement must find: a half disc's
+    rays from the larger radius cross its straight cut into the texture beyond, where a few
+    edges can round off a short arc; a long arc of a circle is not found by chance, so a large
+    ball needs only `_RETRY_MIN_ARC_PX` of outline (``min_confidence`` still applies)."""
+    return min(_RETRY_MIN_CONFIDENCE, _RETRY_MIN_ARC_PX / (2.0 * math.pi * radius))
+
+
 def _threshold(bgr: npt.NDArray[np.uint8], params: DetectorParams) -> npt.NDArray[np.uint8]:
     hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
     return cv2.inRange(hsv, params.hsv_lower, params.hsv_upper)
@@ -1080,12 +1089,13 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     # thresholds): where no candidate is accepted, each is refined again from a larger radius,
     # whose rays can also cross a half disc's straight cut into the texture beyond, so only
     # most of an outline is believed there
-    for scale, min_confidence in ((1.0, 0.0), (_RETRY_SCALE, _RETRY_MIN_CONFIDENCE)):
+    for scale, retry in ((1.0, False), (_RETRY_SCALE, True)):
         best = None
         for centre, radius in guesses[:params.max_candidates]:
             detection = _refine(image, centre, scale * radius, params,
                                 scale * (0.25 * radius + s), colour)
-            if not (_accept(detection, params) and detection.confidence >= min_confidence):
+            if not _accept(detection, params) or (
+                    retry and detection.confidence < _retry_min_confidence(detection.radius)):
                 continue
             if near is not None:
                 return detection
