@@ -1088,7 +1088,7 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     # the blob may be smaller than the ball (its shaded limb falls below the colour
     # thresholds): where no candidate is accepted, each is refined again from a larger radius,
     # whose rays can also cross a half disc's straight cut into the texture beyond, so only
-    # most of an outline is believed there
+    # most of an outline, or a long arc of it, is believed there (`_retry_min_confidence`)
     for scale, retry in ((1.0, False), (_RETRY_SCALE, True)):
         best = None
         for centre, radius in guesses[:params.max_candidates]:
