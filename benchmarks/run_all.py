@@ -14,7 +14,7 @@ was skipped and why. Progress, and the output of a benchmark that failed, go to 
 Time on the shared 2-core machine: ``--quick`` (a few seconds a benchmark, for CI smoke) about
 40 s; the full run about 9 min, 15 min when the machine is busy: planning ~2.5 min (1 mm
 grids, tcod, heapq), knowledge ~3 min (the full 67,200-point build, the Dask scaling),
-elastostatic ~15-30 s (with its ambiguity search), load_estimator ~3 min (six runs of 20 s),
+elastostatic ~15-30 s (with its ambiguity search), load_estimator ~5 min (eight runs of 20 s),
 vision ~25 s, the others ~10 s each.
 
 Exit code 0 when every benchmark ran, whether its targets were met or not (targets are

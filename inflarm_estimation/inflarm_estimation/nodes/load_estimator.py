@@ -27,7 +27,8 @@ Publishes (only for samples whose estimate converged, stamped with the sample's 
 Publishes always:
     diagnostics (diagnostic_msgs/DiagnosticArray, about 1 Hz): samples, estimates and
         rejections since the last report, statuses, cold starts, samples lost in transport,
-        the latest status, alternatives and conditioning. A report with no sample since the
+        the scheduling it runs under (``SCHED_FIFO 50`` by default, `spin_node`), the latest
+        status, alternatives and conditioning. A report with no sample since the
         last one, the last sample older than ``stall_timeout_s`` (steady clock), says the
         stream stalled (level STALE) and for how long; before the first sample, WARN.
 Parameters:
@@ -78,7 +79,7 @@ from inflarm_msgs_json.ros.diagnostics import (
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS, subscription_events
-from inflarm_msgs_json.ros.spin import spin_node
+from inflarm_msgs_json.ros.spin import scheduling, spin_node
 
 PARAMETERS = ARM_PARAMETERS + (
     Parameter('max_condition_number', 1e6,
@@ -105,6 +106,9 @@ PARAMETERS = ARM_PARAMETERS + (
 # JOINT_STATE_QOS, deeper: a Python callback at 1 kHz must not lose samples to a short stall.
 JOINT_STATE_INPUT_QOS = QoSProfile(depth=100, reliability=JOINT_STATE_QOS.reliability,
                                    history=JOINT_STATE_QOS.history)
+# SCHED_FIFO priority of the node's process (`spin_node`), ros2_control's for its control
+# loop: at 1 kHz a busy machine must not keep the node from its samples
+REALTIME_PRIORITY = 50
 LINKS = ('link_1', 'link_2')
 MOTORS = FlexibleArm.MOTOR_JOINT_NAMES
 
@@ -232,7 +236,7 @@ class LoadEstimator(GuardedCallbacks, Node):
             'load_estimator: elastostatic estimate', 'inflatable_arm', level, message,
             samples=samples, converged=converged, samples_total=self.samples_total,
             rejected_samples_total=rejected, lost_samples_total=self.lost_total,
-            cold_starts_total=self.tracker.cold_starts,
+            cold_starts_total=self.tracker.cold_starts, scheduling=scheduling(),
             # in 0.1 s steps: what a stall needs, and the same in every replay of a recording
             seconds_since_sample=round(silent, 1),
             statuses=dict(self.statuses) or 'none',
@@ -246,7 +250,9 @@ class LoadEstimator(GuardedCallbacks, Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    spin_node(LoadEstimator, args, default_executor='events')  # fed at 1 kHz
+    # fed at 1 kHz: the cheaper executor (the estimation README has it measured)
+    spin_node(LoadEstimator, args, default_executor='events',
+              default_realtime_priority=REALTIME_PRIORITY)
 
 
 if __name__ == '__main__':
