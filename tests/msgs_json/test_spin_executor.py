@@ -170,8 +170,9 @@ def thread_scheduling(pid: int) -> set[tuple[int, int]]:
 
 
 def scheduled_as(process: subprocess.Popen, expected: set, err_path, timeout_s: float = 30.0):
-    """Wait until the node process has said what its scheduling is (its log line, or none
-    for priority 0: then until it serves its timer) and return its threads' scheduling."""
+    """The scheduling of the node process's threads once they all have ``expected``, or once
+    its log says it could not take a real-time priority, or after ``timeout_s`` (None if it
+    exited)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and process.poll() is None:
         if thread_scheduling(process.pid) == expected:
