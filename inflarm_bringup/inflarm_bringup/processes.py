@@ -11,7 +11,7 @@ started and stopped together. What ``ros2 run`` and ``ros2 launch`` do, for this
   (``inflarm_msgs_json.ros.signals``): a stop request at any moment is never lost.
 - `ProcessGroup` relays their output prefixed by name, keeps each one's last lines, and stops
   them one at a time, the last started first (SIGINT, then SIGKILL after a grace period,
-  reporting what hung).
+  reporting what hung with its threads' stacks).
 """
 
 import atexit
@@ -169,6 +169,25 @@ def start_node_process(command: list[str], env: dict[str, str], **popen_args) ->
         signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
 
 
+def native_stacks(pid: int, timeout_s: float = 30.0) -> str | None:
+    """Every thread's native stack in process ``pid``, as gdb prints them; None without gdb or
+    when it cannot attach.
+
+    A node stuck in the middleware shows only the Python call into it in its own stack dump;
+    the native frames name the lock it waits on (Fast DDS, rmw).
+    """
+    gdb = shutil.which('gdb')
+    if gdb is None:
+        return None
+    try:
+        run = subprocess.run([gdb, '-p', str(pid), '-batch', '-nx', '-ex', 'thread apply all bt'],
+                             stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                             timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        return None
+    return run.stdout if '#0 ' in run.stdout else None
+
+
 class ProcessGroup:
     """Child processes started together and stopped together."""
 
@@ -195,10 +214,16 @@ class ProcessGroup:
 
     def _relay(self, name: str, process: subprocess.Popen) -> None:
         for line in process.stdout:
-            with self._lock:
-                self.last_lines[name].append(line.rstrip('\n'))
-                self.output.write(f'[{name}] {line}')
-                self.output.flush()
+            self._write(name, [line.rstrip('\n')])
+
+    def _write(self, name: str, lines: list[str], keep: bool = True) -> None:
+        """``lines`` to the output, each prefixed with ``name``; ``keep``: among its last lines."""
+        with self._lock:
+            for line in lines:
+                if keep:
+                    self.last_lines[name].append(line)
+                self.output.write(f'[{name}] {line}\n')
+            self.output.flush()
 
     def exited(self) -> list[str]:
         """The names of the processes that have exited."""
@@ -226,7 +251,8 @@ class ProcessGroup:
         hears of no one leaving.
 
         Returns each child's exit code (negative: killed by that signal). A child that hung
-        first gets SIGUSR1, on which an inflarm node prints every thread's stack.
+        first has its threads' native stacks written to the output (`native_stacks`), then gets
+        SIGUSR1, on which an inflarm node prints every thread's Python stack.
         """
         hung = []
         for name, process in reversed(list(self.processes.items())):
@@ -237,6 +263,9 @@ class ProcessGroup:
                 process.wait(timeout=grace_s)
             except subprocess.TimeoutExpired:
                 hung.append(name)
+                stacks = native_stacks(process.pid)
+                if stacks is not None:
+                    self._write(name, ['native stacks (gdb):', *stacks.splitlines()], keep=False)
                 process.send_signal(signal.SIGUSR1)
                 try:
                     process.wait(timeout=1.0)

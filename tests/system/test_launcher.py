@@ -2,6 +2,8 @@
 
 import io
 import os
+import re
+import shutil
 import sys
 
 import pytest
@@ -75,6 +77,24 @@ def test_rviz_is_refused_in_process(capsys):
         launcher.main(['sim', '--rviz', '--in-process'])
     assert exited.value.code == 2
     assert 'not with --in-process' in capsys.readouterr().err
+
+
+@pytest.mark.skipif(shutil.which('gdb') is None, reason='needs gdb')
+def test_a_node_that_hangs_has_its_native_stacks_written_before_it_is_killed(capsys):
+    # a node stuck in the middleware shows only its Python call into it: gdb names the lock
+    output = io.StringIO()
+    group = ProcessGroup(dict(os.environ), output=output)
+    hang = ('import signal, time; signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT}); '
+            "signal.signal(signal.SIGINT, signal.SIG_IGN); print('stuck', flush=True); "
+            'time.sleep(60)')
+    group.start('stuck', [sys.executable, '-c', hang])
+    assert wait_until(lambda: 'stuck' in ''.join(group.last_lines['stuck']), 20.0)
+    assert group.stop(grace_s=0.5)['stuck'] < 0
+    relayed = output.getvalue()
+    assert '[stuck] native stacks (gdb):' in relayed
+    # the sleeping main thread, down to the interpreter's entry
+    assert re.search(r'^\[stuck\] #0 .*(sleep|select|poll)', relayed, re.MULTILINE), relayed
+    assert re.search(r'^\[stuck\] #\d+ .*Py_\w*Main', relayed, re.MULTILINE), relayed
 
 
 def test_the_group_stops_its_children_one_at_a_time_the_last_started_first(capsys):
