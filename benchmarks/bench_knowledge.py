@@ -9,7 +9,7 @@ Prints, for the paper's full 67,200-point grid (32 MB of .npy arrays in a tempor
 - open time [ms] of the full database (target: the worst of 20 opens <= 50 ms), against
   ``np.fromfile`` reading its codes all;
 - with ``--full-build``: wall time of ``build_knowledge_database`` over all 67,200 points
-  (target <= 120 s on the 2-core machine; ~70 s on the physical plant);
+  (target <= 120 s on the 2-core machine);
 - in the full run (and with ``--distributed``): build speed [points/s] on a Dask cluster of 1 and
   of 2 workers (``distributed.LocalCluster``, one process and one thread per worker, on this
   machine) over 6,400 points (40 x 40 x 4) x 30 trials, against the local build in this process
@@ -169,7 +169,7 @@ def rows(lookup: dict, build: dict | None, scaling: dict | None = None) -> list[
     if build is not None:
         out.append(Row(f"build_knowledge_database, {build['filled']} points", build['wall_s'],
                        's', target=Target(at_most=BUILD_TARGET_S),
-                       note=f"30 trials x 10 s each, {build['workers']} worker(s)"))
+                       note=f"30 trials x 20 s each, {build['workers']} worker(s)"))
     if scaling is not None:
         note = (f'{SCALING_GRID.size} points x 30 trials, blocks of {SCALING_BLOCK}, workers on'
                 f" this 2-core machine at load {scaling['load']:.1f}; files byte-identical")
@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{m['read_all_ms'] / m['open_median_ms']:7.1f}x faster")
     if build is not None:
         print(f"full build           {build['wall_s']:8.1f} s    {build['filled']} points x 30 "
-              f"trials x 10 s, batch {build['batch_size'] or 'default'}, {build['workers']} "
+              f"trials x 20 s, batch {build['batch_size'] or 'default'}, {build['workers']} "
               f"worker(s)   target <= {BUILD_TARGET_S:.0f} s")
     if scaling is not None:
         for name, speed in scaling.items():

@@ -689,7 +689,9 @@ def _learn_block(job: _BuildJob, index: npt.NDArray[np.int64]) -> _LearnedBlock:
         job.start,
         job.grid.point_of(index),
         job.n_trials,
-        duration_s=job.controller_params.memory_steps / rate_hz,
+        # twice the memory (20 s by default, the Fig 7 task's trials): what the PID adds while
+        # the memory's last entry is held is what teaches the hold (pid_ilc, gamma)
+        duration_s=2 * job.controller_params.memory_steps / rate_hz,
         dt=1.0 / rate_hz,
         keep_trajectories=False,
     )
@@ -832,8 +834,9 @@ def build_knowledge_database(
     Learn every knowledge point on a plant and store it (section 3.2 of 001_...).
 
     For each point the task ``start -> point`` is repeated ``n_trials`` times with the PID +
-    iterative learning controller (each trial feeding the next, eqs. (1), (3), (4)), and the
-    chamber outputs of the first ``memory_steps`` steps of the last trial are stored. Points are
+    iterative learning controller (each trial feeding the next, eqs. (1), (3), (4)), each trial
+    twice the memory long (20 s by default), and the chamber outputs of the first
+    ``memory_steps`` steps of the last trial are stored. Points are
     learned in blocks of ``batch_size`` consecutive flat indices (the plant is vectorized over
     the arms of a block), in this process, in a local pool of processes, or on a Dask cluster;
     the executor of the blocks is the only difference. This process alone writes the database,

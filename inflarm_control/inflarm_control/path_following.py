@@ -87,10 +87,11 @@ class PathFollowingParams:
         speed falls linearly.
     feedforward_lead : float
         The feedforward is taken this long ahead of the reference at ``speed`` [s], >= 0:
-        about the plant's lag (the valves' 0.1 s, the PEA's 1 s time constant), so the
-        integral need not carry the ramp and does not overshoot where the path turns or ends.
-        On the paper's obstacle scenario (6 seeds, one/two steps of latency): 1.4-1.6 /
-        1.5-2.8 mm at most from the path with 1.5 s, against 3.0-3.4 / 3.4-4.1 mm with 0.
+        about the plant's lag (the valves' 0.1 s, the PEA's 1 s and the bellows' 0.6 s time
+        constants, the walls' creep), so the integral need not carry the ramp and does not
+        overshoot where the path turns or ends. On the paper's obstacle scenario (seeds 1, 2,
+        3, 7, one step of latency): 1.5-2.0 mm at most from the path with 2.5 s, 1.9-2.1 mm
+        with 2 s, 2.4-2.7 mm with 1.5 s.
     feedforward_dead_zone : float
         The feedforward's x and y outputs shrink by this much towards zero [Pa], >= 0: holding
         pressures learned under the quadrant rule (the knowledge database's) carry the valves'
@@ -110,7 +111,7 @@ class PathFollowingParams:
     speed: float = 0.003
     slow_error: float = 0.0015
     stop_error: float = 0.004
-    feedforward_lead: float = 1.5
+    feedforward_lead: float = 2.5
     feedforward_dead_zone: float = 4e3
     repulsion_gain: float = 1.0
     workspace: Workspace = WORKSPACE_POSITIVE

@@ -17,15 +17,18 @@ Without a memory ``ff`` is the initial output (0 kPa in the paper) and this is t
 Learning (between trials, `PidIlcController.finish_trial`), the reading of eq. (1) that
 converges (the readings are compared in ``inflarm_control/README.md``)::
 
-    m^t_k = clip(ff^t_k + L Q[db(e^t_{k + delta})] + gamma A^t_end, 0, P_set)
+    m^t_k = clip(ff^t_k + L Q[db(e^t_{k + delta})] + gamma (A^t_end - A^t_m), 0, P_set)
 
-a phase-lead P-type update plus a share of the feedback's final correction: ``e`` the position
-error along the actuator's push direction, ``delta`` a lead of a few steps that undoes the
+a phase-lead P-type update plus a share of the feedback's correction of the hold: ``e`` the
+position error along the actuator's push direction, ``delta`` a lead of a few steps that undoes the
 pneumatic and mechanical lag (the "various unavoidable delays" of section 3.1), ``db`` a dead
 band that stops learning from errors the valves and the hysteresis cannot resolve, ``Q`` a
-centred moving average, ``A^t_end = sum_j c^t_j`` the PID's accumulated correction at the end of
-the trial (the steady part of the paper's recorded output, which the slow PID reaches only after
-the error is gone). The last entry learns from the mean error of the rest of the trial. The
+centred moving average, ``A^t_end - A^t_m = sum_{m < j <= end} c^t_j`` what the PID added after
+the memory's last step ``m``, while its last entry was held (the steady part of the paper's
+recorded output, which the slow PID reaches only after the error is gone; 0 in a trial no longer
+than the memory). What it added while the arm moved is left to the error-driven term: handed on
+too, it pushed the hold the way that term pulled it back, and the two settled a few millimetres
+off the target. The last entry learns from the mean error of the rest of the trial. The
 literal reading (the previous output added to every increment) compounds through eq. (3); the
 reading "next output = previous output + this trial's accumulated PID" learns through an
 integrator without lead: on the simulated arm it diverges with the default ``P_set`` and
@@ -169,12 +172,13 @@ class PidIlcParams:
         If False the memory passed to `PidIlcController.start_trial` is ignored (PID alone);
         `PidIlcController.finish_trial` still returns what this trial learned.
     learning_gain : tuple of 3 float
-        ``L`` per axis [Pa/m]: feedforward change per metre of error. About half the inverse
-        static gain of the arm around the Fig 7 target (x, y: ~2 mm per kPa of bellows;
-        z: ~7 mm per kPa of PEA).
+        ``L`` per axis [Pa/m]: feedforward change per metre of error. About a fifth of the
+        arm's inverse static gain around the Fig 7 target (409, 446, 284 kPa/m): with the
+        valves' delay and the walls' creep it learns the Fig 7 task in about 30 trials, as the
+        paper's Fig 8 does (``README.md``).
     learning_lead_steps : tuple of 3 int
         ``delta`` per axis [steps]: error ``delta`` steps later corrects the feedforward of this
-        step. 2 steps (0.4 s) for the fast bellows, 5 (1 s) for the large PEA chamber.
+        step. 3 steps (0.6 s) for the bellows, 5 (1 s) for the large PEA chamber.
     learning_filter_steps : int
         Half-width of the centred moving average ``Q`` [steps]; 0 disables it.
     learning_dead_band : float
@@ -182,10 +186,11 @@ class PidIlcParams:
         it the error is set by the valves' 4 kPa dead zone and the actuators' hysteresis, and
         chasing it makes the RMSE wander from trial to trial.
     learning_feedback_gain : tuple of 3 float
-        ``gamma`` per axis [-]: fraction of the PID's accumulated correction at the end of the
-        trial added to the whole feedforward. The slow integral-like PID removes steady errors
-        before the error-driven update sees them; this hands its final correction (the part of
-        the paper's recorded output that is steady) to the next trial. 0.3.
+        ``gamma`` per axis [-]: fraction of what the PID added after the memory's last step
+        (while its last entry was held) added to the whole feedforward. The slow integral-like
+        PID removes steady errors before the error-driven update sees them; this hands its
+        correction of the hold (the part of the paper's recorded output that is steady) to the
+        next trial, in trials longer than the memory. 0.3.
     quadrant_bellows : tuple of 4 (str, str)
         Quadrant 1-4 -> (bellows driving x, bellows driving y); Fig 4 by default. The x bellows
         must be B2 or B4, the y bellows B1 or B3. Not used with a ``bellows_preload``.
@@ -206,8 +211,8 @@ class PidIlcParams:
     rate_hz: float = 5.0
     memory_steps: int = 50
     learning: bool = True
-    learning_gain: tuple[float, float, float] = (300e3, 300e3, 90e3)
-    learning_lead_steps: tuple[int, int, int] = (2, 2, 5)
+    learning_gain: tuple[float, float, float] = (90e3, 90e3, 60e3)
+    learning_lead_steps: tuple[int, int, int] = (3, 3, 5)
     learning_filter_steps: int = 1
     learning_dead_band: float = 1e-3
     learning_feedback_gain: tuple[float, float, float] = (0.3, 0.3, 0.3)
@@ -415,6 +420,7 @@ class PidIlcController:
         self.start = start
         self.target = target
         self._accumulated = np.zeros((n, 3))
+        self._accumulated_at_memory_end = np.zeros((n, 3))
         self._integral = np.zeros((n, 3))
         self._previous_error = np.zeros((n, 3))
         self._have_previous = np.zeros((n, 1), dtype=bool)
@@ -517,6 +523,8 @@ class PidIlcController:
             fresh = np.isfinite(recorded) & tail
             self._tail_sum += np.where(fresh, recorded, 0.0)
             self._tail_count += fresh
+        if k + 1 == self.params.memory_steps:
+            self._accumulated_at_memory_end = self._accumulated.copy()
         self._command = self._chamber_command(self._output)
         self._k = k + 1
         return self._command.copy()
@@ -558,8 +566,11 @@ class PidIlcController:
         lead_error = np.nan_to_num(lead_error, nan=0.0)
         taught = np.sign(lead_error) * np.maximum(np.abs(lead_error) - p.learning_dead_band, 0.0)
         update = np.asarray(p.learning_gain) * _moving_average(taught, p.learning_filter_steps)
-        # the PID's final correction is the steady-state offset the whole feedforward lacked
-        update += np.asarray(p.learning_feedback_gain) * self._accumulated[:, None, :]
+        if k > m:
+            # what the PID added while the memory's last entry was held: the steady offset the
+            # hold lacked (what it added while the arm moved is the error-driven term's)
+            update += np.asarray(p.learning_feedback_gain) * (
+                self._accumulated - self._accumulated_at_memory_end)[:, None, :]
         learned = np.clip(self._ff + update, self._p_set_min_axis[:, None, :],
                           self._p_set_axis[:, None, :])
         if self._antagonistic:

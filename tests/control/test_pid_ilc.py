@@ -32,18 +32,22 @@ def test_pid_alone_needs_at_least_15_s(fig7_run):
     assert np.all(fig7_run.reach_time[0, 0] >= 15.0)
 
 
-def test_learning_reaches_the_target_within_7_s_by_trial_30(fig7_run):
-    # the physical plant: slow PEA chamber, valve delay, walls' creep (inflarm_hw/README.md)
-    assert np.all(fig7_run.reach_time[9, 0] <= 10.0)
-    assert np.all(fig7_run.reach_time[29, 0] <= 7.0)
+def test_learning_reaches_x_and_z_within_7_s_and_y_within_10_s_by_trial_30(fig7_run):
+    # the paper: x and z in 5 s, y in about 8 s; the physical plant's slow PEA chamber, valve
+    # delay and walls' creep (inflarm_hw/README.md) keep every axis slower than 4 s
+    x, y, z = fig7_run.reach_time[29, 0]
+    assert 4.0 <= x <= 7.0 and 4.0 <= z <= 7.0
+    assert 6.0 <= y <= 10.0
 
 
 def test_rmse_falls_and_never_rises_by_more_than_the_dead_band_wander(fig7_run):
     rmse = fig7_run.rmse[:, 0, :]
-    # with the valve delay the hold hunts within the valves' dead zone and the hysteresis:
-    # measured rises up to 0.017 mm from one trial to the next
+    # with the valve delay the hold could hunt within the valves' dead zone and the
+    # hysteresis (measured: no rise; the smallest fall 0.02 mm)
     assert np.all(np.diff(rmse, axis=0) <= 0.05e-3)
-    assert np.all(rmse[-1] < 0.35 * rmse[0])
+    assert np.all(rmse[-1] < 0.5 * rmse[0])
+    # "decrease following a monotonic trend and remain constant after 30 iterations"
+    assert np.all(rmse[-1] > 0.97 * rmse[-6])
 
 
 def test_rmse_never_increases_on_the_ideal_plant():
@@ -53,7 +57,7 @@ def test_rmse_never_increases_on_the_ideal_plant():
                    keep_trajectories=False)
     rmse = r.rmse[:, 0, :]
     assert np.all(np.diff(rmse, axis=0) <= 0.005e-3)
-    assert np.all(rmse[-1] < 0.35 * rmse[0])
+    assert np.all(rmse[-1] < 0.5 * rmse[0])
 
 
 def test_trial_results_shapes_and_units(fig7_run):
@@ -70,20 +74,36 @@ def test_trial_results_shapes_and_units(fig7_run):
 
 def test_learning_converges_with_vision_noise():
     plant = SoftArmPlant(1, SoftArmPlantParams(), np.random.default_rng(7))  # camera noise
-    r = run_trials(plant, PidIlcController(1), START, TARGET, 10, 20.0, keep_trajectories=False)
+    r = run_trials(plant, PidIlcController(1), START, TARGET, 20, 20.0, keep_trajectories=False)
     assert r.trajectories is None
-    assert np.all(r.rmse[-1, 0] < 0.4 * r.rmse[0, 0])
+    assert np.all(r.rmse[-1, 0] < 0.45 * r.rmse[0, 0])
     # y lies along the camera's line of sight, its noisiest axis
-    assert np.all(r.reach_time[-1, 0] <= 15.0)
+    assert np.all(r.reach_time[-1, 0] <= 10.0)
 
 
-def test_trials_as_short_as_the_memory_still_learn_the_hold():
-    # the knowledge database learns with 10 s trials; the memory must also hold the target after
-    learned = run_trials(SoftArmPlant(1, IDEAL), PidIlcController(1), START, TARGET, 15, 10.0,
+def test_only_what_the_pid_adds_after_the_memory_is_handed_on():
+    # no error-driven term: the memory learns only gamma x the PID's correction of the hold
+    controller = PidIlcController(1, PidIlcParams(learning_gain=(0.0, 0.0, 0.0)))
+    step_pa = np.array([10e3, 10e3, 3e3]) * 0.005  # kp x a steady 5 mm short of the target
+    for steps, held_steps in ((49, 0), (50, 0), (51, 1), (100, 50)):
+        controller.start_trial(START, TARGET)
+        for _ in range(steps):
+            controller.step((TARGET - 0.005)[None], 0.2)
+        memory = controller.finish_trial()
+        expected = 0.3 * held_steps * step_pa  # PEA, B4 (x), B3 (y) in quadrant 1
+        np.testing.assert_allclose(memory[0][:, [PEA, B4, B3]],
+                                   np.tile(expected[[2, 0, 1]], (50, 1)), rtol=1e-12)
+        np.testing.assert_array_equal(memory[0][:, [B1, B2]], 0.0)
+
+
+def test_trials_twice_the_memory_learn_the_hold_beyond_it():
+    # the knowledge database learns with 20 s trials; its memory must hold the target after
+    learned = run_trials(SoftArmPlant(1, IDEAL), PidIlcController(1), START, TARGET, 30, 20.0,
                          keep_trajectories=False)
-    check = run_trials(SoftArmPlant(1, IDEAL), PidIlcController(1, PidIlcParams(learning=True)),
-                       START, TARGET, 1, 30.0, memory=learned.memory)
+    check = run_trials(SoftArmPlant(1, IDEAL), PidIlcController(1), START, TARGET, 1, 30.0,
+                       memory=learned.memory)
     assert np.all(check.reach_time[0, 0] <= 7.0)
+    assert np.all(np.abs(check.trajectories[0, -1, 0] - TARGET) < 2.5e-3)
 
 
 def test_batched_tasks_match_single_task_runs():
@@ -355,12 +375,12 @@ class _BlinkingPlant:
 
 
 def test_run_trials_takes_nan_measurements_as_dropouts():
-    r = run_trials(_BlinkingPlant(), PidIlcController(1), START, TARGET, 10, 20.0)
+    r = run_trials(_BlinkingPlant(), PidIlcController(1), START, TARGET, 20, 20.0)
     lost = np.isnan(r.trajectories[:, :, 0, 0])
-    assert lost.sum() == 10 * 101 // 5
+    assert lost.sum() == 20 * 101 // 5
     assert np.all(np.isfinite(r.rmse)) and np.all(r.reach_time[-1, 0] <= 10.0)
     # the RMSE is that of the measured samples
     error = np.where(lost[..., None], 0.0, r.trajectories[:, :, 0] - TARGET)
     np.testing.assert_allclose(
         r.rmse[:, 0], np.sqrt((error ** 2).sum(axis=1) / (~lost).sum(axis=1)[:, None]))
-    assert np.all(r.rmse[-1, 0] < 0.35 * r.rmse[0, 0])
+    assert np.all(r.rmse[-1, 0] < 0.45 * r.rmse[0, 0])

@@ -68,7 +68,7 @@ def test_defaults_and_read_only_gains(executor):
     assert node.get_parameter('quadrant_bellows').value == ['B4,B3', 'B2,B3', 'B2,B1', 'B4,B1']
     assert node.get_parameter('path.bellows_preload_pa').value == 6000.0
     assert node.get_parameter('path.speed_mps').value == 0.003
-    assert node.get_parameter('path.feedforward_lead_s').value == 1.5
+    assert node.get_parameter('path.feedforward_lead_s').value == 2.5
     assert not node.set_parameters([Parameter('gains.kp', value=[1.0, 1.0, 1.0])])[0].successful
     assert not node.set_parameters([Parameter('trial_duration_s', value=0.0)])[0].successful
 

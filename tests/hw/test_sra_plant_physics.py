@@ -134,23 +134,22 @@ def test_fig7_trial_30_reaches_x_and_z_in_4_to_7_s(fig7_runs):
         assert 4.0 <= z <= 7.0
 
 
-def test_fig7_trial_30_y_is_the_slowest_axis_under_the_camera_noise(fig7_runs):
-    # y lies along the camera's line of sight (depth noise ~1.1 mm against ~0.15 mm across):
-    # the measured y leaves the 5 mm band in some trials' tails, so y is reached last (or not
-    # within the 20 s trial) while x and z are reached in 4-7 s; measured exactly, y is reached
-    # in about 4 s (inflarm_hw/README.md). The paper's 6-10 s for y is not met in every seed.
+def test_fig7_trial_30_reaches_y_in_6_to_10_s_the_slowest_axis(fig7_runs):
+    # the paper: y in about 8 s, after x and z (measured: 6.8-7.4 s, against 5.2-5.8 s for x
+    # and z); the same measured exactly, so y's time is the arm's, not the camera's depth noise
     reach = np.array([run.reach_time[-1, 0] for run in fig7_runs])  # (seeds, 3)
-    assert np.median(reach[:, 1]) > np.median(reach[:, [0, 2]])
+    assert np.all((reach[:, 1] >= 6.0) & (reach[:, 1] <= 10.0)), reach
+    assert np.all(reach[:, 1] > reach[:, [0, 2]].max(axis=1)), reach
     exact = _fig7(1, SoftArmPlantParams(noise_center_px=0.0, noise_radius_px=0.0))
-    assert exact.reach_time[-1, 0, 1] < 7.0
+    assert 6.0 <= exact.reach_time[-1, 0, 1] <= 10.0
 
 
 def test_fig7_trial_rmse_does_not_rise_after_trial_3(fig7_runs):
     for run in fig7_runs:
         rmse = run.rmse[:, 0]  # (trials, 3)
         rises = np.diff(rmse[2:], axis=0)
-        # within the noise: the camera's noise moves a trial's y RMSE (about 20 mm over 100
-        # samples) by ~0.1 mm; rises up to 0.33 mm (1.6 %) occur in y, under 0.06 mm in x, z
+        # within the noise: the camera's noise moves a trial's y RMSE (about 25 mm over 100
+        # samples) by ~0.1 mm; rises up to 0.26 mm (1 %) occur in y, under 0.05 mm in x, z
         assert np.all(rises[:, [0, 2]] < 0.1e-3)
         assert np.all(rises[:, 1] < 0.5e-3)
         assert np.all(rmse[-1] < 0.5 * rmse[0])

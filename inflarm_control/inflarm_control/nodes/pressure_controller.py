@@ -93,7 +93,8 @@ PARAMETERS = (
     Parameter('learning.dead_band_m', _DEFAULTS.learning_dead_band,
               'errors below this teach nothing [m]', range=(0.0, 0.1), read_only=True),
     Parameter('learning.feedback_gain', list(_DEFAULTS.learning_feedback_gain),
-              "share of the trial's final PID correction kept in the memory, per axis",
+              'share of what the PID added after the memory (its last entry held) kept in the '
+              'memory, per axis',
               read_only=True),
     Parameter('quadrant_bellows', [','.join(pair) for pair in _DEFAULTS.quadrant_bellows],
               "bellows driving x,y in quadrants 1-4 (Fig 4: 'B4,B3', 'B2,B3', 'B2,B1', 'B4,B1')",
