@@ -835,13 +835,13 @@ def build_knowledge_database(
 
     For each point the task ``start -> point`` is repeated ``n_trials`` times with the PID +
     iterative learning controller (each trial feeding the next, eqs. (1), (3), (4)), each trial
-    twice the memory long (20 s by default), and the chamber outputs of the first
-    ``memory_steps`` steps of the last trial are stored. Points are
-    learned in blocks of ``batch_size`` consecutive flat indices (the plant is vectorized over
-    the arms of a block), in this process, in a local pool of processes, or on a Dask cluster;
-    the executor of the blocks is the only difference. This process alone writes the database,
-    a block at a time (its memories, then its filled marks). An existing one is resumed: only
-    points not yet filled are learned, so an interrupted build can be restarted.
+    twice the memory long (20 s by default), and the chamber outputs of the first ``memory_steps``
+    steps of the last trial are stored. Points are learned in blocks of ``batch_size`` consecutive
+    flat indices (the plant is vectorized over the arms of a block), in this process, in a local
+    pool of processes, or on a Dask cluster; the executor of the blocks is the only difference.
+    This process alone writes the database, a block at a time (its memories, then its filled
+    marks). An existing one is resumed: only points not yet filled are learned, so an interrupted
+    build can be restarted.
 
     The blocks are fixed by the grid (block ``k`` holds indices ``k * batch_size`` to
     ``(k + 1) * batch_size - 1``, less those already filled), and a block's memories depend

@@ -175,10 +175,10 @@ class SoftArmPlantParams:
     pea_creep_time, bellows_creep_time : float
         Creep time of the wall at small strain, ``eta / (3 mu)`` of the Kelvin-Voigt wall [s];
         the tangent stiffness falls with the stretch (neo-Hookean softening), so a stretched
-        wall creeps more slowly. 0.5 s for the PEA, 1.0 s for a bellows:
-        with the chambers' time constants and the valve delay they set Fig 7's reach times,
-        and were chosen to reproduce them (trial 30 x, z in about 5 s, y in about 8 s, with
-        the controller's defaults: ``inflarm_hw/README.md``).
+        wall creeps more slowly. 0.5 s for the PEA, 1.0 s for a bellows: with the chambers'
+        time constants and the valve delay they set Fig 7's reach times, and were chosen to
+        reproduce them (trial 30 x, z in about 5 s, y in about 8 s, with the controller's
+        defaults: ``inflarm_hw/README.md``).
     pea_play, bellows_play : float
         Half-width of the play (backlash) operator on each chamber's stretch [-]: soft-material
         hysteresis. 0.001 each (0.3 mm per PEA, 1 mrad of tilt): chosen below the paper's 5 mm
