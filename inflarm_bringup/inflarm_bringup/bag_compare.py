@@ -364,10 +364,13 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
         problems.append(f'message kinds differ: {kinds}')
     worst: dict[str, tuple[str, float, int]] = {}  # group -> (quantity, diff, key)
     matched = 0
-    for label in {_label(d) for d in a} & {_label(d) for d in b}:
-        # Merged per label: a message the recorder lost from a callback's several (a status
-        # per link) leaves the others paired with their own.
-        a_, b_ = [d for d in a if _label(d) == label], [d for d in b if _label(d) == label]
+    # Merged per label: a message the recorder lost from a callback's several (a status per
+    # link) leaves the others paired with their own.
+    by_label: dict[tuple, tuple[list, list]] = {}
+    for side, decoded in ((0, a), (1, b)):
+        for d in decoded:
+            by_label.setdefault(_label(d), ([], []))[side].append(d)
+    for a_, b_ in by_label.values():
         i = j = 0
         while i < len(a_) and j < len(b_):
             gap = b_[j][0] - a_[i][0]

@@ -108,6 +108,14 @@ def node_class(path: str) -> type[Node]:
     return getattr(importlib.import_module(module), name)
 
 
+def _by_key(messages: Iterable[BagMessage], msg_type: type) -> dict[tuple, list[bytes]]:
+    """``{(stamp, digest): [CDR, ...]}`` of ``messages`` (`message_key`), in their order."""
+    index: dict[tuple, list[bytes]] = defaultdict(list)
+    for m in messages:
+        index[message_key(deserialize_message(m.data, msg_type))].append(m.data)
+    return index
+
+
 class LockstepNodes:
     """Nodes built for a replay; a context manager that destroys them on exit.
 
@@ -202,7 +210,8 @@ class LockstepNodes:
         """
         workers = {name: [w for w in vars(node).values() if isinstance(w, LatestJobWorker)]
                    for name, node in self.nodes.items()}
-        inputs: dict[tuple, list[bytes]] = {}  # (msg type, topic, stamp, digest) -> CDR
+        # (topic, msg type) -> {(stamp, digest): CDR in record order}, built on first use
+        inputs: dict[tuple[str, type], dict[tuple, list[bytes]]] = {}
         taken: Counter[tuple] = Counter()  # (node, (topic, stamp, digest)) -> messages taken
         ran = Counter({name: 0 for name in self.nodes})
         skipped = []
@@ -216,12 +225,13 @@ class LockstepNodes:
             else:
                 key = (record.callback, record.stamp_ns, record.digest)
                 if (record.callback, msg_type) not in inputs:
-                    self._index(record.callback, msg_type, recorded, inputs)
+                    inputs[(record.callback, msg_type)] = _by_key(
+                        recorded.get(record.callback, ()), msg_type)
                 # the node's n-th message of this key: replayed if a node published it
                 n = taken[(name, key)]
                 source = self._published.get(key, [])
                 if n >= len(source):
-                    source = inputs.get((msg_type, *key), [])
+                    source = inputs[(record.callback, msg_type)].get(key[1:], [])
                 if n >= len(source):
                     skipped.append((name, record))
                     continue
@@ -231,14 +241,6 @@ class LockstepNodes:
                 worker.wait()
             ran[name] += 1
         return dict(ran), skipped
-
-    @staticmethod
-    def _index(topic: str, msg_type: type, recorded: Mapping[str, Sequence[BagMessage]],
-               inputs: dict[tuple, list[bytes]]) -> None:
-        inputs[(topic, msg_type)] = []  # marks the topic indexed
-        for m in recorded.get(topic, ()):
-            key = message_key(deserialize_message(m.data, msg_type))
-            inputs.setdefault((msg_type, topic, *key), []).append(m.data)
 
     def close(self) -> None:
         for node in self.nodes.values():
