@@ -3,6 +3,7 @@ DDS, the nodes under test publishing their callback records) replays every outpu
 identically twice; a record whose message the recorder lost is skipped and counted; it fails on
 a changed parameter naming the topic, and rejects a bag without callback records."""
 
+import dataclasses
 import pathlib
 import signal
 
@@ -19,8 +20,8 @@ import yaml
 
 from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, compare
 from inflarm_bringup.bag_regression import main, regression, replay
-from inflarm_hw.bag import BagWriter, bag_info, read_messages
-from inflarm_msgs_json import ControlTask, TrialReport, decode
+from inflarm_hw.bag import BagWriter, bag_info, read_messages, serialize, typestore
+from inflarm_msgs_json import ControlTask, TrialReport, decode, encode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
 from ros_harness import NodeProcesses, lock_free_domain, spin_until
@@ -273,3 +274,35 @@ def test_a_bag_without_callback_records_is_rejected_with_what_is_missing(recorde
     assert '--nodes: expected names of' in capsys.readouterr().err
     assert main([str(bag), '--tolerance', 'force:0.1']) == 2
     assert 'expected [TOPIC:]QUANTITY=VALUE' in capsys.readouterr().err
+
+
+def _with_records(bag: pathlib.Path, out: pathlib.Path, change) -> pathlib.Path:
+    """``bag`` copied to ``out`` with its first ``/callback_log`` text replaced by
+    ``change(text)``."""
+    info = bag_info(bag)
+    string = typestore().types['std_msgs/msg/String']
+    changed = False
+    with BagWriter(out) as writer:
+        for topic, topic_info in sorted(info.topics.items()):
+            writer.add_topic(topic, topic_info.msgtype, topic_info.offered_qos)
+        for m in read_messages(bag, sorted(info.topics)):
+            data = m.data
+            if m.topic == '/callback_log' and not changed:
+                text = typestore().deserialize_cdr(m.data, m.msgtype).data
+                data, changed = serialize(string(data=change(text)), m.msgtype), True
+            writer.write(m.topic, m.timestamp_ns, data)
+    return out
+
+
+def test_a_malformed_or_unknown_callback_record_is_rejected_naming_it(recorded, tmp_path,
+                                                                     capsys):
+    bag, params_file = recorded
+    torn = _with_records(bag, tmp_path / 'torn', lambda text: text[:len(text) // 2])
+    assert main([str(torn), '--params-file', str(params_file)]) == 2
+    err = capsys.readouterr().err
+    assert '/callback_log at ' in err and ' ns: ' in err
+
+    renamed = _with_records(bag, tmp_path / 'renamed', lambda text: encode(
+        dataclasses.replace(decode(text), callback='timer nope')))
+    assert main([str(renamed), '--params-file', str(params_file)]) == 2
+    assert "has no callbacks ['timer nope'] that the bag records" in capsys.readouterr().err
