@@ -1,42 +1,27 @@
 """Recorded against replayed messages, topic by topic: counts, matches, per-field differences.
 
 The pure half of the bag regression (``inflarm_bringup.bag_regression``): no rclpy. Messages
-are `inflarm_hw.bag.BagMessage` tuples (CDR bytes and a record or publish time), decoded with
-the ``rosbags`` Jazzy typestore on both sides, so both are read by one decoder.
+are `inflarm_hw.bag.BagMessage` tuples, decoded on both sides by the ``rosbags`` typestore.
 
 Matching. Messages with a header stamp on both sides are matched by stamp, the others by time
-(record time in the bag, publish time in the replay). Both sequences are sorted by that key and
-merged in order: a recorded and a replayed message are a match when their keys differ by at
-most half the median spacing of the recorded keys (any difference when a topic holds a single
-message), so that a stream at a fixed rate never pairs a message with its neighbour. What
-is left over on either side is unmatched, except replayed messages outside the span of the
-recorded ones (by more than that window): a recorder sees a topic only from when it
-subscribed to it until it stopped, while the replay runs over the whole bag. They are counted
-as ``outside``. A topic with a ``match_window`` tolerance [s] (``/link_status``: 0.1 s, one
-period) is instead paired one to one, nearest in time first, with recorded messages of the same
-names within that window (and its ``alternative`` is the nearest one). Within the window a
-message is paired only with one of the same names and frames (its exact fields: e.g. the link
-of a LinkStatus), so a lost one does not shift the rest. ``from_ns`` leaves a topic's start-up
-out on both sides (``skipped``). For a timer's outputs (``neighbours``), a recorded message out
-of tolerance against its replayed one may match the ``alternative`` replay's message of the
-same key instead (its ambiguous inputs in the other order: ``by_alternative``); one out of
-tolerance in both counts as unmatched (``out_of_tolerance``), within the ``unmatched`` share.
+(record time in the bag, publish time in the replay), among those of the same label (the kind
+and the text fields: a link's name, joint names, frames; a status the recorder lost does not
+shift the next link's onto it). Both sides are sorted by that key (stably) and merged: two
+messages match when their keys differ by at most half the median spacing of the replay's
+distinct keys (a callback publishes at one time: its messages share a key; else the recorded
+keys; by any amount with fewer than two), so that a stream at a fixed rate never pairs a message
+with its neighbour. The rest is unmatched, except replayed messages outside the compared
+recorded span by more than that (``outside``): a recorder sees a topic only while it is
+subscribed, the replay runs over the whole bag. Recorded messages before a topic's start
+(``starts``) are not compared (``skipped``); the replayed ones before it are outside.
 
-Fields. Each message is flattened into leaves (``position[2]``, ``wrench.force.x``; for inflarm
-JSON messages in ``std_msgs/String``, the JSON fields: ``chambers.B1``, ``rmse[0]``), grouped by
-field (``position``, ``wrench.force``, ``chambers``) and each group has a quantity
-(`QUANTITIES`): position [m or rad], velocity, force [N], torque [N m], pressure [Pa], time [s],
-ratio [1]. A group without one (names, frames, integers, strings) must be equal. A leaf on
-one side only, a ``null`` against a number, or unequal text is an infinite difference. The
-header stamp is the match key and is not compared.
-
-Tolerances (`Tolerances`) are absolute, in SI units, per quantity and optionally per topic
-(``/estimated_wrench:force``); ``unmatched`` is the share of messages of a topic (of the larger
-count) that may be left unmatched, e.g. a sample a best-effort recorder lost; ``match_window``
-[s], where given for a topic, pairs by nearest time within it (0: half the median spacing).
+Fields. A message's leaves (`flatten`) are grouped by field; a group has a quantity
+(`QUANTITIES`) or must be equal. A leaf on one side only, a ``null`` against a number or
+unequal text differs by inf. Tolerances (`Tolerances`) are absolute, in SI units, per quantity
+and optionally per topic, over every matched message; ``unmatched`` is the share of a topic's
+messages (of the larger count) that may be left unmatched.
 """
 
-import bisect
 from collections.abc import Iterable, Mapping, Sequence
 import csv
 from dataclasses import dataclass, field, fields, is_dataclass
@@ -48,24 +33,12 @@ import numpy as np
 
 from inflarm_hw.bag import BagMessage, deserialize, normalize_topic
 
-__all__ = [
-    'DEFAULT_TOLERANCES',
-    'QUANTITIES',
-    'UNITS',
-    'FieldDifference',
-    'Report',
-    'TopicComparison',
-    'Tolerances',
-    'compare',
-    'flatten',
-    'stamp_ns',
-]
+__all__ = ['DEFAULT_TOLERANCES', 'QUANTITIES', 'UNITS', 'FieldDifference', 'Report',
+           'TopicComparison', 'Tolerances', 'compare', 'flatten', 'stamp_ns']
 
-STRING = 'std_msgs/msg/String'
 # Messages whose x/y/z(/w) are one field group (a point, a force), not three.
 VECTOR_TYPES = frozenset({'geometry_msgs/msg/Point', 'geometry_msgs/msg/Point32',
                           'geometry_msgs/msg/Vector3', 'geometry_msgs/msg/Quaternion'})
-JSON_ENVELOPE = ('type', 'schema_version')
 _MISSING = object()  # a leaf on one side only
 
 #: (message kind, field group) -> quantity. The kind is the ROS type, or for inflarm JSON
@@ -77,12 +50,9 @@ QUANTITIES: Mapping[tuple[str, str], str] = {
     ('geometry_msgs/msg/WrenchStamped', 'wrench.force'): 'force',
     ('geometry_msgs/msg/WrenchStamped', 'wrench.torque'): 'torque',
     ('geometry_msgs/msg/PointStamped', 'point'): 'position',
-    ('PressureCommand', 'chambers'): 'pressure',
-    ('ChamberPressures', 'chambers'): 'pressure',
-    ('TrialReport', 'rmse'): 'position',
-    ('TrialReport', 'reach_time'): 'time',
-    ('LinkStatus', 'pressure'): 'pressure',
-    ('LinkStatus', 'wrinkling_moment'): 'torque',
+    ('PressureCommand', 'chambers'): 'pressure', ('ChamberPressures', 'chambers'): 'pressure',
+    ('TrialReport', 'rmse'): 'position', ('TrialReport', 'reach_time'): 'time',
+    ('LinkStatus', 'pressure'): 'pressure', ('LinkStatus', 'wrinkling_moment'): 'torque',
     ('LinkStatus', 'moment'): 'torque',
     ('LinkStatus', 'margin'): 'torque',  # wrinkling_moment - moment [N m]
 }
@@ -90,20 +60,13 @@ QUANTITIES: Mapping[tuple[str, str], str] = {
 UNITS: Mapping[str, str] = {
     'position': 'm|rad', 'velocity': 'm/s|rad/s', 'force': 'N', 'torque': 'N m',
     'pressure': 'Pa', 'time': 's', 'ratio': '1', 'exact': '', 'unmatched': 'share',
-    'match_window': 's',
 }
 
 
 @dataclass(frozen=True)
 class Tolerances:
-    """Absolute tolerances [SI] by quantity, with per-topic overrides.
-
-    Attributes
-    ----------
-    values : mapping of str to float
-        ``'<quantity>'`` or ``'<topic>:<quantity>'`` (fully qualified topic) -> tolerance;
-        quantities as in `UNITS`. ``'exact'`` is always 0.
-    """
+    """Absolute tolerances [SI]: ``values`` maps ``'<quantity>'`` (`UNITS`) or
+    ``'<topic>:<quantity>'`` (fully qualified topic, overriding it there) to one."""
 
     values: Mapping[str, float]
 
@@ -113,12 +76,10 @@ class Tolerances:
             if quantity not in UNITS:
                 raise ValueError(f'tolerance {key!r}: unknown quantity {quantity!r}, expected '
                                  f'one of {sorted(UNITS)}')
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f'tolerance {key!r}: expected a finite number >= 0, got '
-                                 f'{value!r}')
-            if quantity == 'unmatched' and value > 1.0:
-                raise ValueError(f'tolerance {key!r}: a share of messages, at most 1, got '
-                                 f'{value!r}')
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0
+                    and (quantity != 'unmatched' or value <= 1.0)):
+                raise ValueError(f'tolerance {key!r}: expected a finite number >= 0 (a share '
+                                 f'<= 1 for unmatched), got {value!r}')
 
     def of(self, topic: str, quantity: str) -> float:
         """The tolerance of ``quantity`` on ``topic`` (the topic's own, else the quantity's)."""
@@ -127,52 +88,32 @@ class Tolerances:
         return float(self.values.get(f'{topic}:{quantity}', self.values.get(quantity, 0.0)))
 
     def updated(self, specs: Iterable[str]) -> 'Tolerances':
-        """These tolerances with ``specs`` (``'force=0.01'``, ``'estimated_wrench:force=0.1'``)
-        applied.
+        """These tolerances with ``specs`` (``'[TOPIC:]QUANTITY=VALUE'``) applied.
 
         Raises
         ------
         ValueError
-            On a spec that is not ``[TOPIC:]QUANTITY=VALUE`` with a known quantity and a
-            number >= 0.
+            On a malformed spec, an unknown quantity or a value that is not a number >= 0.
         """
         values = dict(self.values)
         for spec in specs:
-            key, sep, text = spec.partition('=')
+            key, _, text = spec.partition('=')
             topic, colon, quantity = key.strip().rpartition(':')
-            try:
-                value = float(text)
+            try:  # the quantity and the value are checked by Tolerances
+                values[f'{normalize_topic(topic)}:{quantity}' if colon else quantity] = float(text)
             except ValueError:
-                value = math.nan
-            if not sep or not quantity or not math.isfinite(value):
                 raise ValueError(f'tolerance {spec!r}: expected [TOPIC:]QUANTITY=VALUE, e.g. '
-                                 "'force=0.01' or 'estimated_wrench:force=0.1'")
-            values[f'{normalize_topic(topic)}:{quantity}' if colon else quantity] = value
+                                 "'force=0.01' or 'estimated_wrench:force=0.1'") from None
         return Tolerances(values)
 
 
-#: The defaults: absolute tolerances per quantity, overridden per topic where a topic needs its
-#: own, set between the replay-to-replay differences of a recorded run and what a changed
-#: parameter moves (``inflarm_bringup/README.md`` has the figures).
+#: The defaults: absolute tolerances per quantity, above the rounding by which a replay on
+#: another machine may differ (on the one that recorded it, none) and far below what a changed
+#: parameter moves (``inflarm_bringup/README.md``). ``unmatched`` allows for samples a
+#: best-effort recorder lost: a changed node fails its fields instead.
 DEFAULT_TOLERANCES = Tolerances({
     'position': 1e-4, 'velocity': 1e-3, 'force': 1e-3, 'torque': 1e-3, 'pressure': 100.0,
     'time': 0.25, 'ratio': 1e-4, 'unmatched': 0.05,
-    # A trial's RMSE over its N steps (20 in a 4 s trial at 5 Hz): one step that took the
-    # 20 Hz ball sample next to the recorded one (ordering ambiguity) changes one error by
-    # the ball's motion in 50 ms, delta (up to ~4 mm at the trial's start), and the RMSE by at
-    # most delta / sqrt(N) ~ 1 mm; a changed controller moves it by centimetres.
-    '/trial_report:position': 1e-3,
-    # elastostatic_ik plans a whole path from one load estimate, the latest when the path
-    # arrives; which one is latest is a sub-millisecond ordering the record cannot fix, and
-    # one estimate's sample-to-sample noise moves the plan. 1e-3 rad (0.6 mm at the tip of a
-    # 0.6 m link) is above that and below what a 10 % stiffer IK model moves it by (README).
-    '/motor_position_command:position': 1e-3,
-    # The load estimator's 10 Hz link status publishes only when a new estimate arrived since
-    # its last firing: whether a firing publishes is the same ordering ambiguity. Its messages
-    # are matched to the nearest recorded one of the same link within one period (0.1 s), the
-    # matched values compared, and up to 15 % of them may be unmatched (a count difference).
-    '/link_status:match_window': 0.1,
-    '/link_status:unmatched': 0.15,
 })
 
 
@@ -211,8 +152,6 @@ class TopicComparison:
     fields: tuple[FieldDifference, ...] = ()
     problems: tuple[str, ...] = ()  # messages that could not be decoded, type mismatches
     skipped: int = 0  # recorded messages in the start-up period: not compared, not counted
-    by_alternative: int = 0  # recorded messages matched by the other order's replay
-    out_of_tolerance: int = 0  # paired, out of tolerance in both orders: unmatched
 
     @property
     def unmatched_share(self) -> float:
@@ -229,23 +168,24 @@ class TopicComparison:
         """What is out of tolerance, in words."""
         out = list(self.problems)
         if self.matched == 0 and (self.recorded or self.replayed):
-            out.append(f'no message matched ({self.recorded} recorded, {self.replayed} '
-                       'replayed' + (f', {self.out_of_tolerance} paired but out of tolerance '
-                                     'in both input orders' if self.out_of_tolerance else '')
-                       + ')')
+            out.append(f'no message matched ({self.recorded} recorded, {self.replayed} replayed)')
         elif self.unmatched_share > self.unmatched_tolerance:
             out.append(f'{self.unmatched_share:.1%} of the messages unmatched (tolerance '
                        f'{self.unmatched_tolerance:.1%}): {self.recorded} recorded, '
                        f'{self.replayed - self.outside} replayed in their span, '
-                       f'{self.matched} matched'
-                       + (f', {self.out_of_tolerance} paired but out of tolerance in both '
-                          'input orders' if self.out_of_tolerance else ''))
+                       f'{self.matched} matched')
         for f in self.fields:
             if not f.passed:
-                unit = UNITS[f.quantity]
-                out.append(f'{f.group} differs by {f.max_abs_diff:.4g}{" " + unit if unit else ""}'
-                           f' (tolerance {f.tolerance:g}) at {f.worst_key_ns * 1e-9:.6f} s')
+                unit = ' ' + UNITS[f.quantity] if UNITS[f.quantity] else ''
+                out.append(f'{f.group} differs by {f.max_abs_diff:.4g}{unit} (tolerance '
+                           f'{f.tolerance:g}) at {f.worst_key_ns * 1e-9:.6f} s')
         return out
+
+
+_HEADER = ('topic', 'key', 'recorded', 'replayed', 'outside', 'matched', 'field', 'max |diff|',
+           'tolerance', 'ok')
+_CSV = ('topic', 'type', 'key', 'recorded', 'replayed', 'outside', 'matched', 'field',
+        'quantity', 'unit', 'max_abs_diff', 'tolerance', 'ok')
 
 
 @dataclass(frozen=True)
@@ -263,63 +203,48 @@ class Report:
         return [t.topic for t in self.topics if not t.passed]
 
     def rows(self) -> list[dict[str, object]]:
-        """One row per topic and field group (a topic without fields: one row)."""
-        rows = []
-        for t in self.topics:
-            base = {'topic': t.topic, 'type': t.msgtype, 'key': t.key, 'recorded': t.recorded,
-                    'replayed': t.replayed, 'outside': t.outside, 'matched': t.matched}
-            for f in t.fields or (None,):
-                rows.append({**base,
-                             'field': '' if f is None else f.group,
-                             'quantity': '' if f is None else f.quantity,
-                             'unit': '' if f is None else UNITS[f.quantity],
-                             'max_abs_diff': '' if f is None else f.max_abs_diff,
-                             'tolerance': '' if f is None else f.tolerance,
-                             'ok': t.passed if f is None else f.passed})
-        return rows
+        """One row per topic and field group (a topic without fields: one row), `_CSV`'s keys."""
+        return [dict(zip(_CSV, (
+            t.topic, t.msgtype, t.key, t.recorded, t.replayed, t.outside, t.matched,
+            *(('',) * 5 + (t.passed,) if f is None else (
+                f.group, f.quantity, UNITS[f.quantity], f.max_abs_diff, f.tolerance, f.passed))),
+            strict=True)) for t in self.topics for f in t.fields or (None,)]
 
     def table(self) -> str:
         """The report as a fixed-width text table, then the failures."""
-        header = ('topic', 'key', 'recorded', 'replayed', 'outside', 'matched', 'field',
-                  'max |diff|', 'tolerance', 'ok')
-        lines = [[str(r['topic']), str(r['key']), str(r['recorded']), str(r['replayed']),
-                  str(r['outside']), str(r['matched']), _field_label(r),
-                  _number(r['max_abs_diff']), _number(r['tolerance']),
-                  'ok' if r['ok'] else 'FAIL'] for r in self.rows()]
-        widths = [max(len(h), *(len(line[i]) for line in lines)) if lines else len(h)
-                  for i, h in enumerate(header)]
-        text = [_row(header, widths), _row(['-' * w for w in widths], widths)]
-        text += [_row(line, widths) for line in lines]
-        text += self._summary()
-        return '\n'.join(text)
+        lines = [_HEADER, *self._cells()]
+        widths = [max(len(line[i]) for line in lines) for i in range(len(_HEADER))]
+        lines.insert(1, ['-' * w for w in widths])
+        # The topic, key and field columns to the left, the numbers to the right.
+        return '\n'.join(['  '.join(c.ljust(w) if i in (0, 1, 6) else c.rjust(w)
+                                    for i, (c, w) in enumerate(zip(line, widths, strict=True))
+                                    ).rstrip() for line in lines] + self._summary())
 
     def markdown(self) -> str:
         """The report as a markdown table, then the failures."""
-        header = ('topic', 'key', 'recorded', 'replayed', 'outside', 'matched', 'field',
-                  'max \\|diff\\|', 'tolerance', 'ok')
-        text = ['| ' + ' | '.join(header) + ' |', '|' + ' --- |' * len(header)]
-        for r in self.rows():
-            text.append('| ' + ' | '.join((
-                f"`{r['topic']}`", str(r['key']), str(r['recorded']), str(r['replayed']),
-                str(r['outside']), str(r['matched']), _field_label(r), _number(r['max_abs_diff']),
-                _number(r['tolerance']), 'ok' if r['ok'] else '**FAIL**')) + ' |')
+        text = ['| ' + ' | '.join(h.replace('|', '\\|') for h in _HEADER) + ' |',
+                '|' + ' --- |' * len(_HEADER)]
+        text += ['| ' + ' | '.join((f'`{topic}`', *cells, 'ok' if ok == 'ok' else '**FAIL**'))
+                 + ' |' for topic, *cells, ok in self._cells()]
         return '\n'.join(text + [''] + [f'- {line}' for line in self._summary()]) + '\n'
 
     def csv(self) -> str:
         """The report's rows as CSV (max_abs_diff and tolerance in the unit column's unit)."""
         out = io.StringIO()
-        writer = csv.DictWriter(out, fieldnames=['topic', 'type', 'key', 'recorded', 'replayed',
-                                                 'outside', 'matched', 'field', 'quantity', 'unit',
-                                                 'max_abs_diff', 'tolerance', 'ok'])
+        writer = csv.DictWriter(out, fieldnames=_CSV)
         writer.writeheader()
         for row in self.rows():
             writer.writerow({k: repr(v) if isinstance(v, float) else v for k, v in row.items()})
         return out.getvalue()
 
+    def _cells(self) -> list[list[str]]:
+        return [[f'{c:.3g}' if isinstance(c, float) else str(c) for c in (
+            r['topic'], r['key'], r['recorded'], r['replayed'], r['outside'], r['matched'],
+            f"{r['field']} [{r['unit']}]" if r['field'] and r['unit'] else r['field'],
+            r['max_abs_diff'], r['tolerance'], 'ok' if r['ok'] else 'FAIL')] for r in self.rows()]
+
     def _summary(self) -> list[str]:
-        lines = []
-        for t in self.topics:
-            lines += [f'FAIL {t.topic}: {failure}' for failure in t.failures()]
+        lines = [f'FAIL {t.topic}: {failure}' for t in self.topics for failure in t.failures()]
         if self.not_compared:
             lines.append(f"not compared (not in the bag): {', '.join(self.not_compared)}")
         if self.passed:
@@ -331,109 +256,63 @@ class Report:
         return lines
 
 
-def _field_label(row: Mapping[str, object]) -> str:
-    if not row['field']:
-        return ''
-    unit = row['unit']
-    return f"{row['field']} [{unit}]" if unit else str(row['field'])
-
-
-def _number(value: object) -> str:
-    return f'{value:.3g}' if isinstance(value, float) else str(value)
-
-
-def _row(cells: Sequence[str], widths: Sequence[int]) -> str:
-    first = cells[0].ljust(widths[0])
-    rest = [c.rjust(w) if i not in (0, 5) else c.ljust(w)
-            for i, (c, w) in enumerate(zip(cells[1:], widths[1:], strict=True))]
-    return '  '.join([first, *rest]).rstrip()
-
-
 # -- flattening ----------------------------------------------------------------------------------
 
 Leaf = float | int | bool | str | None
 
 
 def flatten(message: object, msgtype: str) -> tuple[str, dict[str, tuple[str, Leaf]]]:
-    """A decoded message as ``(kind, {leaf path: (field group, value)})``, header stamp left out.
+    """A decoded message (`inflarm_hw.bag.deserialize`) of ROS type ``msgtype`` as ``(kind,
+    {leaf path: (field group, value)})``, e.g. ``'wrench.force.x': ('wrench.force', 0.1)``.
 
-    Parameters
-    ----------
-    message : rosbags message
-        As `inflarm_hw.bag.deserialize` returns it.
-    msgtype : str
-        Its ROS type.
-
-    Returns
-    -------
-    kind : str
-        ``msgtype``, or the ``type`` of an inflarm JSON message carried in a ``std_msgs/String``.
-    leaves : dict
-        Leaf path (``'wrench.force.x'``, ``'position[1]'``, ``'chambers.B1'``) -> (group, value).
+    The kind is ``msgtype``, or the ``type`` of an inflarm JSON message carried in a
+    ``std_msgs/String`` (leaves: its JSON fields, ``'chambers.B1'``). The header stamp (the
+    match key) is left out.
     """
     leaves: dict[str, tuple[str, Leaf]] = {}
-    if msgtype == STRING:
+    if msgtype == 'std_msgs/msg/String':
         try:
             body = json.loads(message.data)
         except ValueError:
             body = None
         if isinstance(body, dict) and isinstance(body.get('type'), str):
             for key, value in body.items():
-                if key not in JSON_ENVELOPE:  # the kind says which type it is
-                    _flatten_json(value, key, key, leaves)
+                if key not in ('type', 'schema_version'):  # the kind says which type it is
+                    _flatten(value, key, key, leaves)
             return body['type'], leaves
-    _flatten_ros(message, '', None, leaves)
-    leaves.pop('header.stamp.sec', None)
-    leaves.pop('header.stamp.nanosec', None)
+    _flatten(message, '', None, leaves)
+    for part in ('sec', 'nanosec'):  # the match key
+        leaves.pop(f'header.stamp.{part}', None)
     return msgtype, leaves
 
 
-def _flatten_ros(value: object, path: str, group: str | None,
-                 leaves: dict[str, tuple[str, Leaf]]) -> None:
-    if is_dataclass(value):
+def _flatten(value: object, path: str, group: str | None,
+             leaves: dict[str, tuple[str, Leaf]]) -> None:
+    # A leaf's group: the top-level JSON field, else the nearest array or vector around it,
+    # else the leaf itself.
+    if is_dataclass(value):  # a rosbags message (whose __msgtype__ is no field)
         if group is None and path and getattr(value, '__msgtype__', '') in VECTOR_TYPES:
             group = path
-        for f in fields(value):
-            if f.name.startswith('__'):  # rosbags' __msgtype__
-                continue
-            _flatten_ros(getattr(value, f.name), f'{path}.{f.name}' if path else f.name, group,
-                         leaves)
+        value = {f.name: getattr(value, f.name) for f in fields(value)
+                 if not f.name.startswith('__')}
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _flatten(item, f'{path}.{key}' if path else key, group, leaves)
     elif isinstance(value, (np.ndarray, list, tuple)):
         for i, item in enumerate(value.tolist() if isinstance(value, np.ndarray) else value):
-            _flatten_ros(item, f'{path}[{i}]', group or path, leaves)
+            _flatten(item, f'{path}[{i}]', group or path, leaves)
     else:
         leaves[path] = (group or path, value.item() if isinstance(value, np.generic) else value)
 
 
-def _flatten_json(value: object, path: str, group: str,
-                  leaves: dict[str, tuple[str, Leaf]]) -> None:
-    if isinstance(value, dict):
-        for key, item in value.items():
-            _flatten_json(item, f'{path}.{key}', group, leaves)
-    elif isinstance(value, list):
-        for i, item in enumerate(value):
-            _flatten_json(item, f'{path}[{i}]', group, leaves)
-    else:
-        leaves[path] = (group, value)
-
-
 def _difference(a: Leaf, b: Leaf) -> float:
-    numeric = (int, float)
-    if (isinstance(a, numeric) and isinstance(b, numeric) and not isinstance(a, bool)
-            and not isinstance(b, bool)):
-        d = abs(float(a) - float(b))
-        return 0.0 if math.isnan(a) and math.isnan(b) else (math.inf if math.isnan(d) else d)
-    return 0.0 if a == b else math.inf
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (a, b)):
+        return 0.0 if a == b else math.inf
+    d = abs(float(a) - float(b))
+    return 0.0 if math.isnan(a) and math.isnan(b) else (math.inf if math.isnan(d) else d)
 
 
 # -- matching ------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class _Decoded:
-    key_ns: int
-    kind: str
-    leaves: dict[str, tuple[str, Leaf]]
-
 
 def stamp_ns(message: object) -> int | None:
     """The header stamp [ns] of a decoded message, or None when it has no header."""
@@ -441,227 +320,111 @@ def stamp_ns(message: object) -> int | None:
     return None if stamp is None else stamp.sec * 10**9 + stamp.nanosec
 
 
-def _decode(messages: Sequence[BagMessage], problems: list[str], side: str
-            ) -> list[tuple[BagMessage, object]]:
-    out = []
-    for m in messages:
-        try:
-            out.append((m, deserialize(m.data, m.msgtype)))
-        except ValueError as err:
-            problems.append(f'{side} message at {m.timestamp_ns * 1e-9:.6f} s: {err}')
-    return out
-
-
-def _match_window(keys: Sequence[int]) -> float:
-    if len(keys) < 2:
-        return math.inf
-    spacing = float(np.median(np.diff(np.sort(np.asarray(keys, dtype=np.int64)))))
-    return max(spacing / 2.0, 1.0)
-
-
-def _signature(d: _Decoded) -> tuple:
-    # What must be equal (names, frames, links): a message is only ever paired with one of
-    # the same signature.
-    return tuple(sorted((path, repr(value)) for path, (group, value) in d.leaves.items()
-                        if QUANTITIES.get((d.kind, group), 'exact') == 'exact'))
-
-
-def _differences(a: _Decoded, b: _Decoded) -> dict[str, tuple[str, float]]:
-    out: dict[str, tuple[str, float]] = {}
-    for path in a.leaves.keys() | b.leaves.keys():
-        group = (a.leaves.get(path) or b.leaves[path])[0]
-        left = a.leaves.get(path, (group, _MISSING))[1]
-        right = b.leaves.get(path, (group, _MISSING))[1]
-        diff = math.inf if _MISSING in (left, right) else _difference(left, right)
-        quantity = QUANTITIES.get((a.kind, group), 'exact')
-        if group not in out or diff > out[group][1]:
-            out[group] = (quantity, diff)
-    return out
-
-
-def _badness(diffs: Mapping[str, tuple[str, float]], topic: str,
-             tolerances: Tolerances) -> float:
-    # The largest difference in tolerances (0: equal; > 1: out of tolerance).
-    worst = 0.0
-    for quantity, diff in diffs.values():
-        tol = tolerances.of(topic, quantity)
-        worst = max(worst, (0.0 if diff == 0 else math.inf) if tol == 0 else diff / tol)
-    return worst
-
-
-def _nearest_pairs(a: Sequence[_Decoded], b: Sequence[_Decoded], sig_a: Sequence[tuple],
-                   sig_b: Sequence[tuple], window: float) -> list[tuple[int, int]]:
-    # One-to-one pairs (i, j) of a recorded and a replayed message of the same signature
-    # within ``window`` [ns] of each other, the nearest first (greedy by time difference).
-    keys_b = [d.key_ns for d in b]
-    candidates = []
-    for i, d in enumerate(a):
-        lo = bisect.bisect_left(keys_b, d.key_ns - window)
-        hi = bisect.bisect_right(keys_b, d.key_ns + window)
-        candidates += [(abs(keys_b[j] - d.key_ns), i, j) for j in range(lo, hi)
-                       if sig_b[j] == sig_a[i]]
-    used_a: set[int] = set()
-    used_b: set[int] = set()
-    pairs = []
-    for _, i, j in sorted(candidates):
-        if i not in used_a and j not in used_b:
-            used_a.add(i)
-            used_b.add(j)
-            pairs.append((i, j))
-    return sorted(pairs)
+def _label(decoded: tuple) -> tuple:
+    # What names a message among a callback's several: its kind and its text leaves that are
+    # no quantity (a link's name, joint names, frames).
+    _, kind, leaves = decoded
+    return kind, tuple(sorted((path, value) for path, (group, value) in leaves.items()
+                              if isinstance(value, str) and (kind, group) not in QUANTITIES))
 
 
 def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequence[BagMessage],
-                   tolerances: Tolerances, from_ns: int | None = None,
-                   alternative: Sequence[BagMessage] | None = None) -> TopicComparison:
+                   tolerances: Tolerances, start_ns: int | None = None) -> TopicComparison:
     problems: list[str] = []
     types = sorted({m.msgtype for m in (*recorded, *replayed)})
     if len(types) > 1:
         problems.append(f'message types differ: {types}')
-    rec = _decode(recorded, problems, 'recorded')
-    rep = _decode(replayed, problems, 'replayed')
+    rec: list[tuple[BagMessage, object]] = []
+    rep: list[tuple[BagMessage, object]] = []
+    for side, messages, out in (('recorded', recorded, rec), ('replayed', replayed, rep)):
+        for m in messages:
+            try:
+                out.append((m, deserialize(m.data, m.msgtype)))
+            except ValueError as err:
+                problems.append(f'{side} message at {m.timestamp_ns * 1e-9:.6f} s: {err}')
     stamps = [stamp_ns(msg) for _, msg in (*rec, *rep)]
     by_stamp = bool(stamps) and all(s is not None and s > 0 for s in stamps)
-
-    def decoded(pairs):
-        out = []
-        for m, msg in pairs:
-            kind, leaves = flatten(msg, m.msgtype)
-            out.append(_Decoded(stamp_ns(msg) if by_stamp else m.timestamp_ns, kind, leaves))
-        return sorted(out, key=lambda d: d.key_ns)
-
-    a, b = decoded(rec), decoded(rep)
+    # (key [ns], kind, leaves) by key, from the start on; sorted() is stable, so messages of
+    # one key keep the order they were recorded or published in.
+    a, b = (sorted(((stamp_ns(msg) if by_stamp else m.timestamp_ns, *flatten(msg, m.msgtype))
+                    for m, msg in side), key=lambda d: d[0]) for side in (rec, rep))
     skipped = 0
-    if from_ns is not None:  # the start-up period is not compared (on either side)
-        skipped = sum(d.key_ns < from_ns for d in a)
-        a = [d for d in a if d.key_ns >= from_ns]
-        b = [d for d in b if d.key_ns >= from_ns]
-    nearest_s = tolerances.of(topic, 'match_window')
-    window = nearest_s * 1e9 if nearest_s > 0 else _match_window([d.key_ns for d in a])
-    inside = [d for d in b if a and a[0].key_ns - window <= d.key_ns <= a[-1].key_ns + window]
-    outside = len(b) - len(inside) if a else 0
-    b = inside if a else b
-    kinds = sorted({d.kind for d in (*a, *b)})
+    if start_ns is not None:
+        skipped = sum(d[0] < start_ns for d in a)
+        a = [d for d in a if d[0] >= start_ns]  # the replayed ones before: outside
+    # The replay publishes a callback's messages at its one time, the recorder takes them in
+    # spread out: the spacing of the replay's distinct keys is the rate's.
+    keys = np.unique([d[0] for d in b]) if len({d[0] for d in b}) > 1 else np.unique(
+        [d[0] for d in a])
+    window = max(float(np.median(np.diff(keys))) / 2.0, 1.0) if len(keys) > 1 else math.inf
+    inside = [d for d in b if not a or a[0][0] - window <= d[0] <= a[-1][0] + window]
+    outside, b = len(b) - len(inside), inside
+    kinds = sorted({d[1] for d in (*a, *b)})
     if len(kinds) > 1:
         problems.append(f'message kinds differ: {kinds}')
-    sig_a, sig_b = [_signature(d) for d in a], [_signature(d) for d in b]
-    alt = decoded(_decode(alternative or (), problems, 'alternative'))
-    alt_keys = [d.key_ns for d in alt]
-
-    def near(i: int, j: int) -> bool:
-        return i < len(a) and j < len(b) and abs(b[j].key_ns - a[i].key_ns) <= window
-
-    def alternatives(i: int) -> list[_Decoded]:
-        # The other replay's messages of a[i]'s key and signature (by nearest time: the
-        # nearest one of them).
-        lo = bisect.bisect_left(alt_keys, a[i].key_ns - window)
-        hi = bisect.bisect_right(alt_keys, a[i].key_ns + window)
-        same = [d for d in alt[lo:hi] if _signature(d) == sig_a[i]]
-        if nearest_s > 0 and same:
-            return [min(same, key=lambda d: abs(d.key_ns - a[i].key_ns))]
-        return same
-
     worst: dict[str, tuple[str, float, int]] = {}  # group -> (quantity, diff, key)
-    counts = {'matched': 0, 'by_alternative': 0, 'out_of_tolerance': 0}
-
-    def pair(i: int, j: int) -> None:
-        diffs = _differences(a[i], b[j])
-        if alternative is not None and _badness(diffs, topic, tolerances) > 1.0:
-            first = diffs
-            for other in alternatives(i):
-                again = _differences(a[i], other)
-                if _badness(again, topic, tolerances) < _badness(diffs, topic, tolerances):
-                    diffs = again
-            if _badness(diffs, topic, tolerances) > 1.0:  # left unmatched (counted)
-                counts['out_of_tolerance'] += 1
-                return
-            counts['by_alternative'] += diffs is not first
-        for group, (quantity, diff) in diffs.items():
-            if group not in worst or diff > worst[group][1]:
-                worst[group] = (quantity, diff, a[i].key_ns)
-        counts['matched'] += 1
-
-    if nearest_s > 0:
-        for i, j in _nearest_pairs(a, b, sig_a, sig_b, window):
-            pair(i, j)
-    i = j = 0
-    while nearest_s <= 0 and i < len(a) and j < len(b):
-        gap = b[j].key_ns - a[i].key_ns
-        if abs(gap) <= window:
-            if sig_a[i] != sig_b[j]:  # e.g. one link's status lost: pair the others by name
-                if near(i + 1, j) and sig_a[i + 1] == sig_b[j]:
-                    i += 1
-                    continue
-                if near(i, j + 1) and sig_a[i] == sig_b[j + 1]:
-                    j += 1
-                    continue
-            pair(i, j)
-            i += 1
-            j += 1
-        elif gap < 0:
-            j += 1
-        else:
-            i += 1
-    matched, by_alternative, out_of_tolerance = (
-        counts['matched'], counts['by_alternative'], counts['out_of_tolerance'])
+    matched = 0
+    # Merged per label: a message the recorder lost from a callback's several (a status per
+    # link) leaves the others paired with their own.
+    by_label: dict[tuple, tuple[list, list]] = {}
+    for side, decoded in ((0, a), (1, b)):
+        for d in decoded:
+            by_label.setdefault(_label(d), ([], []))[side].append(d)
+    for a_, b_ in by_label.values():
+        i = j = 0
+        while i < len(a_) and j < len(b_):
+            gap = b_[j][0] - a_[i][0]
+            if gap < -window:
+                j += 1
+            elif gap > window:
+                i += 1
+            else:
+                (key, kind, left), right = a_[i], b_[j][2]
+                for path in left.keys() | right.keys():
+                    group = (left.get(path) or right[path])[0]
+                    x = left.get(path, (group, _MISSING))[1]
+                    y = right.get(path, (group, _MISSING))[1]
+                    diff = math.inf if _MISSING in (x, y) else _difference(x, y)
+                    if group not in worst or diff > worst[group][1]:
+                        worst[group] = (QUANTITIES.get((kind, group), 'exact'), diff, key)
+                matched, i, j = matched + 1, i + 1, j + 1
     differences = tuple(
         FieldDifference(group, quantity, diff, tolerances.of(topic, quantity), key)
         for group, (quantity, diff, key) in sorted(worst.items()))
     return TopicComparison(topic, types[0] if types else '', 'stamp' if by_stamp else 'time',
-                           len(a), len(b) + outside, matched,
-                           tolerances.of(topic, 'unmatched'), outside, differences,
-                           tuple(problems), skipped, by_alternative, out_of_tolerance)
+                           len(a), len(b) + outside, matched, tolerances.of(topic, 'unmatched'),
+                           outside, differences, tuple(problems), skipped)
 
 
 def compare(recorded: Iterable[BagMessage], replayed: Iterable[BagMessage],
-            tolerances: Tolerances = DEFAULT_TOLERANCES,
-            topics: Iterable[str] | None = None, from_ns: Mapping[str, int] | None = None,
-            neighbours: Iterable[str] = (),
-            alternative: Iterable[BagMessage] = ()) -> Report:
+            tolerances: Tolerances = DEFAULT_TOLERANCES, topics: Sequence[str] | None = None,
+            starts: Mapping[str, int] | None = None) -> Report:
     """Compare recorded with replayed messages, topic by topic.
 
     Parameters
     ----------
     recorded, replayed : iterable of BagMessage
-        ``(topic, msgtype, time [ns], CDR bytes)``: from a bag (`inflarm_hw.bag.read_messages`)
-        and from a replay (`inflarm_bringup.bag_regression.Replay.outputs`).
+        From a bag (`inflarm_hw.bag.read_messages`) and a replay (``Replay.outputs``).
     tolerances : Tolerances
-        Per quantity and topic; `DEFAULT_TOLERANCES` when not given.
-    topics : iterable of str, optional
-        The topics to compare; default: those on both sides. A topic on one side only is
-        compared too when named here (and fails: nothing matches).
-    from_ns : mapping of str to int, optional
-        Topic -> the start of its comparison [ns] (stamp or time, the topic's match key):
-        messages before it on either side are start-up, not compared (counted as
-        ``skipped``).
-    neighbours : iterable of str
-        Topics (the outputs of timers) whose recorded message, out of tolerance against the
-        replayed one, may match the ``alternative`` message of the same key and names
-        instead: a timer can see an input taken in at about the moment it fired either
-        before or after it (module docstring).
-    alternative : iterable of BagMessage
-        The other replay's outputs (inputs ambiguous against a firing in the other order).
+    topics : sequence of str, optional
+        The topics to compare; default: those on both sides. A topic named here that is on one
+        side only fails (nothing matches).
+    starts : mapping of str to int, optional
+        Topic -> the start of its comparison [ns] (in its match key: stamp or time).
 
     Returns
     -------
     Report
-        ``report.passed``, the failures in words, and the table (text, markdown, CSV).
     """
     by_topic: dict[str, tuple[list[BagMessage], list[BagMessage]]] = {}
     for side, messages in ((0, recorded), (1, replayed)):
         for m in messages:
             by_topic.setdefault(m.topic, ([], []))[side].append(m)
-    others: dict[str, list[BagMessage]] = {}
-    for m in alternative:
-        others.setdefault(m.topic, []).append(m)
     if topics is None:
         names = sorted(t for t, (a, b) in by_topic.items() if a and b)
         not_compared = tuple(sorted(t for t, (a, b) in by_topic.items() if b and not a))
     else:
-        names = sorted({normalize_topic(t) for t in topics})
-        not_compared = ()
-    starts = {normalize_topic(t): v for t, v in (from_ns or {}).items()}
-    near = {normalize_topic(t) for t in neighbours}
-    return Report(tuple(_compare_topic(t, *by_topic.get(t, ([], [])), tolerances,
-                                       starts.get(t), others.get(t, []) if t in near else None)
+        names, not_compared = sorted({normalize_topic(t) for t in topics}), ()
+    start = {normalize_topic(t): v for t, v in (starts or {}).items()}
+    return Report(tuple(_compare_topic(t, *by_topic.get(t, ([], [])), tolerances, start.get(t))
                         for t in names), not_compared)

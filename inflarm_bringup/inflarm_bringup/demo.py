@@ -54,6 +54,7 @@ import time
 
 import numpy as np
 
+from inflarm_bringup.bag_regression import NODES as REPLAYABLE_NODES
 from inflarm_bringup.processes import NodeProcess, ProcessGroup, ros_environment
 from inflarm_bringup.systems import (
     VIEW_HOST,
@@ -89,7 +90,7 @@ RECORDED_TOPICS = (
     'planned_path', 'planning_markers', 'obstacles', 'plan_request', 'control_task',
     'trial_report', 'joint_states', 'estimated_joint_states', 'estimated_wrench',
     'tip_position_truth', 'tip_trajectory', 'motor_position_command', 'link_status',
-    'robot_description',
+    'robot_description', 'callback_log',
 )
 
 
@@ -565,8 +566,10 @@ def demo_nodes(backend: Backend, knowledge: pathlib.Path, seed: int, bag: pathli
                bag_storage: str) -> tuple[NodeProcess, ...]:
     """The ``sim`` system's nodes, the simulators seeded with ``seed``, the pressure
     controller on the ``knowledge`` database, and the recorder of the ``bag``."""
-    ours = {'pressure_controller': {'knowledge_db_path': str(knowledge)},
-            **{simulator: {'seed': seed} for simulator in SIMULATORS}}
+    ours = {simulator: {'seed': seed} for simulator in SIMULATORS}
+    # the bag's nodes record their callbacks: inflarm-bag-regression replays them
+    ours.update({node: {'callback_log': True} for node in REPLAYABLE_NODES})
+    ours['pressure_controller']['knowledge_db_path'] = str(knowledge)
     return tuple(replace(n, parameters={**n.parameters, **ours.get(n.executable, {})})
                  for n in system_nodes('sim', backend)) + (
         NodeProcess('inflarm_hw', 'bag_recorder', parameters={

@@ -11,7 +11,9 @@ True
 
 from inflarm_msgs_json.codec import decode, encode
 from inflarm_msgs_json.messages import (
+    CALLBACK_LOG_TOPIC,
     VACUUM_GAUGE_PA,
+    CallbackRecord,
     ChamberPressures,
     ControlTask,
     Cuboid,
@@ -27,8 +29,10 @@ from inflarm_msgs_json.messages import (
 from inflarm_msgs_json.spec import MESSAGE_TYPES, Message, MessageError, json_schema
 
 __all__ = [
+    'CALLBACK_LOG_TOPIC',
     'MESSAGE_TYPES',
     'VACUUM_GAUGE_PA',
+    'CallbackRecord',
     'ChamberPressures',
     'ControlTask',
     'Cuboid',

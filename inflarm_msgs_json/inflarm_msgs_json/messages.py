@@ -238,6 +238,27 @@ class TrialReport(Message):
     )
 
 
+#: Where inflarm nodes publish their `CallbackRecord`s (parameter ``callback_log``).
+CALLBACK_LOG_TOPIC = '/callback_log'
+
+
+@dataclass(frozen=True)
+class CallbackRecord(Message):
+    """One callback a node ran: what ``inflarm-bag-regression`` replays, in this order."""
+
+    node: str = field_spec(NAME, "the node's fully qualified name, e.g. '/load_estimator'")
+    callback: str = field_spec(
+        NAME, "a subscription's resolved topic, e.g. '/joint_states', or 'timer <name>'"
+    )
+    time_ns: int = field_spec(COUNT, "the node's clock when the callback began [ns]")
+    stamp_ns: int | None = field_spec(
+        Nullable(COUNT), 'the header stamp of the message taken [ns]; null without one'
+    )
+    digest: int | None = field_spec(
+        Nullable(COUNT), 'CRC-32 of the text of a std_msgs/String taken; null otherwise'
+    )
+
+
 @dataclass(frozen=True)
 class LinkStatus(Message):
     """Wrinkling safety of one inflated link: how far its bending moment is from wrinkling.

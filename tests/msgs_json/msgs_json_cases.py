@@ -6,6 +6,7 @@ from hypothesis import strategies as st
 
 from inflarm_msgs_json import (
     MESSAGE_TYPES,
+    CallbackRecord,
     ChamberPressures,
     ControlTask,
     Cuboid,
@@ -41,6 +42,8 @@ EXAMPLES = {
     'TrialReport': TrialReport(3, (0.004, 0.0, 0.012), (1.25, None, 0.0)),
     'LinkStatus': LinkStatus('link_1', 35000.0, 2.5, 0.75, 1.75),
     'LinkPressures': LinkPressures({'link_1': 50010.5, 'link_2': 49990.0}),
+    'CallbackRecord': CallbackRecord('/load_estimator', '/joint_states', 1764968400123456789,
+                                     1764968400120000000, None),
     'HardwareStatus': HardwareStatus(
         'active', 'connected', 'hold', 'safe', ('over_pressure', 'link_lost'),
         ('over_pressure',), 'over_pressure: B1 at 131000 Pa', 0.023, 2, 1, 0),
@@ -90,6 +93,8 @@ STRATEGIES = {
     ),
     'LinkStatus': st.builds(LinkStatus.from_moments, names, positive, nonnegative, nonnegative),
     'LinkPressures': st.builds(LinkPressures, gauge_pressures),
+    'CallbackRecord': st.builds(CallbackRecord, names, names, counts, st.none() | counts,
+                                st.none() | counts),
     'HardwareStatus': st.lists(names, max_size=4, unique=True).flatmap(
         lambda faults: st.builds(
             HardwareStatus,

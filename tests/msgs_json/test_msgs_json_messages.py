@@ -34,6 +34,7 @@ def test_examples_cover_every_message_type():
     assert set(EXAMPLES) == set(MESSAGE_TYPES) == {
         'ObstacleSet', 'PlanRequest', 'PlanOutcome', 'PressureCommand', 'ChamberPressures',
         'ControlTask', 'TrialReport', 'LinkStatus', 'LinkPressures', 'HardwareStatus',
+            'CallbackRecord',
     }  # fmt: skip
 
 

@@ -1,24 +1,16 @@
-"""Nodes under test driven in lock step, in this process: the rclpy half of the bag regression.
+"""The nodes under test of the bag regression (``inflarm_bringup.bag_regression``), replayed
+callback by callback in this process: its rclpy half.
 
-`LockstepNodes` builds nodes in a private rclpy context whose DDS discovery is off (nothing they
-do reaches another process, and nothing from one reaches them), with ``use_sim_time``. It never
-spins them: `LockstepNodes.run` sets their clocks (a ``rosgraph_msgs/Clock`` handed to each
-node's own ``/clock`` subscription), hands each input to the callbacks of the subscriptions on
-its topic (a message deserialized by rclpy from the CDR bytes), and calls each timer's callback
-when it is due. Publishers are replaced by a capture: a published message becomes canonical CDR
-(`to_cdr`) with its publish time, and is handed on to the nodes under test that subscribe to
-its topic before time moves on. A node's background jobs (`LatestJobWorker`) are waited for
-after each callback: in simulated time computing takes none. See
-``inflarm_bringup.bag_regression`` for why.
+The nodes are built in a private rclpy context with DDS discovery off (nothing reaches another
+process), on simulated time, and never spun. Their publishers are a `Publisher` subclass
+(``create_publisher``'s ``publisher_class``) that captures each message as canonical CDR at the
+simulated time. A node's background jobs (`LatestJobWorker`) are waited for after each callback.
 """
 
-from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections import Counter, defaultdict
+from collections.abc import Iterable, Mapping, Sequence
 import contextlib
-import functools
-import heapq
 import importlib
-import itertools
 import os
 
 import numpy as np
@@ -27,12 +19,14 @@ from rclpy.exceptions import ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message
 from rclpy.time import Time
-from rosgraph_msgs.msg import Clock
 
 from inflarm_bringup.node_io import INFRASTRUCTURE_TOPICS, NodeIo
 from inflarm_hw.bag import BagMessage, typestore
+from inflarm_msgs_json import CallbackRecord
+from inflarm_msgs_json.ros.node import message_key
 from inflarm_msgs_json.ros.worker import LatestJobWorker
 
 __all__ = ['LockstepNodes', 'msgtype_of', 'to_cdr']
@@ -114,8 +108,16 @@ def node_class(path: str) -> type[Node]:
     return getattr(importlib.import_module(module), name)
 
 
+def _by_key(messages: Iterable[BagMessage], msg_type: type) -> dict[tuple, list[bytes]]:
+    """``{(stamp, digest): [CDR, ...]}`` of ``messages`` (`message_key`), in their order."""
+    index: dict[tuple, list[bytes]] = defaultdict(list)
+    for m in messages:
+        index[message_key(deserialize_message(m.data, msg_type))].append(m.data)
+    return index
+
+
 class LockstepNodes:
-    """Nodes built for a lock-step replay; a context manager that destroys them on exit.
+    """Nodes built for a replay; a context manager that destroys them on exit.
 
     Parameters
     ----------
@@ -136,12 +138,10 @@ class LockstepNodes:
         with _discovery_off():
             rclpy.init(context=self.context, args=[])
         self.nodes: dict[str, Node] = {}
+        #: What the nodes published, in order, stamped with the simulated time.
         self.outputs: list[BagMessage] = []
-        self._pending: deque[BagMessage] = deque()
+        self._published: dict[tuple, list[bytes]] = defaultdict(list)  # by (topic, *key)
         self._now_ns = 0
-        #: Topics published from a timer callback (the outputs whose timing is the timer's).
-        self.timer_topics: set[str] = set()
-        self._in_timer = False
         try:
             for name, path in classes.items():
                 self.nodes[name] = self._build(name, path, params_files.get(name, ()))
@@ -150,143 +150,97 @@ class LockstepNodes:
             raise
 
     def _build(self, name: str, path: str, files: Sequence[str]) -> Node:
+        replay = self
+
+        class Captured(Publisher):
+            def publish(self, msg: object) -> None:
+                if self.topic_name in INFRASTRUCTURE_TOPICS:
+                    super().publish(msg)
+                else:
+                    replay._capture(self.topic_name, msg)
+
+        class Replayed(node_class(path)):
+            def create_publisher(self, *args, **kwargs) -> Publisher:
+                return super().create_publisher(*args, **kwargs, publisher_class=Captured)
+
         args = ['--ros-args']
         for file in files:
             args += ['--params-file', str(file)]
         try:
-            node = node_class(path)(
-                context=self.context, cli_args=args, use_global_arguments=False,
-                parameter_overrides=[Parameter('use_sim_time', value=True)])
+            return Replayed(context=self.context, cli_args=args, use_global_arguments=False,
+                            parameter_overrides=[Parameter('use_sim_time', value=True),
+                                                 Parameter('callback_log', value=False)])
         except (ValueError, TypeError, ParameterException, _rclpy.RCLError) as err:
             raise ValueError(f'{name}: cannot be built from its parameters ({", ".join(files)})'
                              f': {err}') from err
-        for publisher in node.publishers:
-            if publisher.topic_name not in INFRASTRUCTURE_TOPICS:
-                msgtype = msgtype_of(publisher.msg_type)
-                publisher.publish = functools.partial(self._capture, publisher.topic_name,
-                                                      msgtype)
-        return node
 
     def io(self, name: str) -> NodeIo:
-        """What the node ``name`` subscribes to and publishes, and its timers' periods."""
+        """What the node ``name`` subscribes to and publishes."""
         node = self.nodes[name]
         return NodeIo(
             name,
             {s.topic_name: msgtype_of(s.msg_type) for s in node.subscriptions
              if s.topic_name not in INFRASTRUCTURE_TOPICS},
             {p.topic_name: msgtype_of(p.msg_type) for p in node.publishers
-             if p.topic_name not in INFRASTRUCTURE_TOPICS},
-            tuple(t.timer_period_ns for t in node.timers))
+             if p.topic_name not in INFRASTRUCTURE_TOPICS})
 
-    def keep(self, names: Iterable[str]) -> None:
-        """Destroy every node but ``names``."""
-        keep = set(names)
-        for name in [n for n in self.nodes if n not in keep]:
-            self.nodes.pop(name).destroy_node()
-
-    # -- the lock-step loop ----------------------------------------------------------------------
-
-    def _capture(self, topic: str, msgtype: str, msg: object) -> None:
-        data = msg if isinstance(msg, bytes) else to_cdr(msg)
-        message = BagMessage(topic, msgtype, self._now_ns, data)
+    def _capture(self, topic: str, msg: object) -> None:
+        message = BagMessage(topic, msgtype_of(type(msg)), self._now_ns, to_cdr(msg))
         self.outputs.append(message)
-        self._pending.append(message)
-        if self._in_timer:
-            self.timer_topics.add(topic)
+        self._published[(topic, *message_key(msg))].append(message.data)
 
-    def _set_time(self, now_ns: int, clocks: Sequence[Callable]) -> None:
-        if now_ns == self._now_ns:
-            return
-        self._now_ns = now_ns
-        msg = Clock(clock=Time(nanoseconds=now_ns).to_msg())
-        for callback in clocks:
-            callback(msg)
-
-    def run(self, inputs: Iterable[tuple[BagMessage, Sequence[str]]], start_ns: int,
-            end_ns: int, due: Mapping[tuple[str, int], Sequence[int]]) -> int:
-        """Deliver ``inputs`` and fire the timers from ``start_ns`` to ``end_ns``.
+    def run(self, records: Iterable[tuple[str, CallbackRecord]],
+            recorded: Mapping[str, Sequence[BagMessage]]
+            ) -> tuple[dict[str, int], list[tuple[str, CallbackRecord]]]:
+        """Run the callbacks ``records`` name, in their order.
 
         Parameters
         ----------
-        inputs : iterable of (BagMessage, sequence of str)
-            In time order, each with the nodes it goes to (to each of their subscriptions on
-            its topic).
-        start_ns, end_ns : int
-            The simulated time span [ns]: the clocks start at ``start_ns``; timers due up to
-            ``end_ns`` fire after the last input.
-        due : mapping
-            ``(node name, timer index)`` -> the increasing times [ns] the timer fires at; a
-            timer not in it fires every period from ``start_ns``. A timer fires before an
-            input of the same time only if it is due earlier.
+        records : iterable of (str, CallbackRecord)
+            Node name and record, in time order.
+        recorded : mapping of str to sequence of BagMessage
+            Input topic -> the bag's messages, in record order. A subscription callback takes
+            the first message of its topic with the record's stamp and digest that a node
+            under test published, else that the bag holds; each node takes each once.
 
         Returns
         -------
-        int
-            The number of inputs delivered. The outputs are in ``self.outputs``.
+        dict of str to int, list of (str, CallbackRecord)
+            Node name -> callbacks run; the records skipped (their message in neither).
         """
-        subscribers: dict[str, list] = {}  # topic -> [(node name, subscription)]
-        clocks = []
-        for name, node in self.nodes.items():
-            for sub in node.subscriptions:
-                if sub.topic_name == '/clock':
-                    clocks.append(sub.callback)
-                elif sub.topic_name not in INFRASTRUCTURE_TOPICS:
-                    subscribers.setdefault(sub.topic_name, []).append((name, sub))
-        self._now_ns = -1
-        self._set_time(start_ns, clocks)
-        timers: list[tuple[Node, object, Iterator[int]]] = []
-        heap: list[tuple[int, int]] = []  # (due time, index into timers)
-        for name, node in self.nodes.items():
-            for index, timer in enumerate(node.timers):
-                period = timer.timer_period_ns
-                times = iter(due.get((name, index), itertools.count(start_ns + period, period)))
-                timers.append((node, timer, times))
-                first = next(times, None)
-                if first is not None:
-                    heapq.heappush(heap, (first, len(timers) - 1))
-
-        workers = [w for node in self.nodes.values() for w in vars(node).values()
-                   if isinstance(w, LatestJobWorker)]
-
-        def deliver(message: BagMessage, to: Sequence[str] | None = None) -> None:
-            for name, sub in subscribers.get(message.topic, ()):
-                if to is None or name in to:
-                    sub.callback(deserialize_message(message.data, sub.msg_type))
-
-        def drain() -> None:
-            for worker in workers:
-                worker.wait()
-            while self._pending:
-                deliver(self._pending.popleft())
-                for worker in workers:
-                    worker.wait()
-
-        def fire_until(limit_ns: int, inclusive: bool) -> None:
-            while heap and (heap[0][0] < limit_ns or (inclusive and heap[0][0] == limit_ns)):
-                when, order = heapq.heappop(heap)
-                node, timer, times = timers[order]
-                later = next(times, None)
-                if later is not None:
-                    heapq.heappush(heap, (later, order))
-                if timer not in node.timers or timer.is_canceled():
+        workers = {name: [w for w in vars(node).values() if isinstance(w, LatestJobWorker)]
+                   for name, node in self.nodes.items()}
+        # (topic, msg type) -> {(stamp, digest): CDR in record order}, built on first use
+        inputs: dict[tuple[str, type], dict[tuple, list[bytes]]] = {}
+        taken: Counter[tuple] = Counter()  # (node, (topic, stamp, digest)) -> messages taken
+        ran = Counter({name: 0 for name in self.nodes})
+        skipped = []
+        for name, record in records:
+            node = self.nodes[name]
+            msg_type, callback = node.guarded_callbacks[record.callback]
+            self._now_ns = record.time_ns
+            node.get_clock().set_ros_time_override(Time(nanoseconds=record.time_ns))
+            if msg_type is None:
+                callback()
+            else:
+                key = (record.callback, record.stamp_ns, record.digest)
+                if (record.callback, msg_type) not in inputs:
+                    inputs[(record.callback, msg_type)] = _by_key(
+                        recorded.get(record.callback, ()), msg_type)
+                # the node's n-th message of this key: replayed if a node published it
+                n = taken[(name, key)]
+                source = self._published.get(key, [])
+                if n >= len(source):
+                    source = inputs[(record.callback, msg_type)].get(key[1:], [])
+                if n >= len(source):
+                    skipped.append((name, record))
                     continue
-                self._set_time(when, clocks)
-                self._in_timer = True
-                try:
-                    timer.callback()
-                finally:
-                    self._in_timer = False
-                drain()
-
-        count = 0
-        for message, to in inputs:
-            fire_until(message.timestamp_ns, inclusive=False)
-            self._set_time(message.timestamp_ns, clocks)
-            deliver(message, to)
-            drain()
-            count += 1
-        fire_until(end_ns, inclusive=True)
-        return count
+                taken[(name, key)] += 1
+                callback(deserialize_message(source[n], msg_type))
+            for worker in workers[name]:
+                worker.wait()
+            ran[name] += 1
+        return dict(ran), skipped
 
     def close(self) -> None:
         for node in self.nodes.values():

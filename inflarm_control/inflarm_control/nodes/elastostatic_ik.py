@@ -281,7 +281,7 @@ class ElastostaticIk(GuardedCallbacks, Node):
             self.get_logger().info('tip_trajectory dropped: a newer command replaced it')
             return
         # a path solved late is joined where it is due now, so the arm is not late all along it
-        now_ns = self.get_clock().now().nanoseconds
+        now_ns = self.callback_time().nanoseconds
         start_ns = now_ns if job.start_ns is None else job.start_ns
         late_s = (now_ns - start_ns) * 1e-9
         if late_s >= job.times[-1]:
@@ -312,7 +312,7 @@ class ElastostaticIk(GuardedCallbacks, Node):
             if self.set_point is not None:
                 self.publish_command(self.set_point)
             return
-        elapsed = (self.get_clock().now().nanoseconds - self.trajectory_start_ns) * 1e-9
+        elapsed = (self.callback_time().nanoseconds - self.trajectory_start_ns) * 1e-9
         if elapsed < 0.0:
             return
         times = self.trajectory.times
@@ -329,7 +329,7 @@ class ElastostaticIk(GuardedCallbacks, Node):
         """Command ``q_m`` with a velocity feed-forward (zero when holding)."""
         self.set_point = q_m
         self.command_pub.publish(joint_state(
-            MOTORS, self.get_clock().now().to_msg(), position=q_m,
+            MOTORS, self.callback_time().to_msg(), position=q_m,
             velocity=np.zeros(3) if velocity is None else velocity))
 
 

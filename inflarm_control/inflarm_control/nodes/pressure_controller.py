@@ -209,7 +209,7 @@ class PressureController(GuardedCallbacks, Node):
         self.session.limits = trial_limits(self.params)
 
     def now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds
+        return self.callback_time().nanoseconds
 
     # -- inputs --------------------------------------------------------------------------------
 

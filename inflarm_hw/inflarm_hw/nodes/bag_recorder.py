@@ -31,7 +31,8 @@ from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from inflarm_hw.bag import STORAGES, BagWriter, TopicQos
-from inflarm_msgs_json.ros.node import GuardedCallbacks
+from inflarm_msgs_json import CALLBACK_LOG_TOPIC
+from inflarm_msgs_json.ros.node import CALLBACK_LOG_QOS, GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
 from inflarm_msgs_json.ros.spin import spin_node
 
@@ -76,7 +77,7 @@ def offered_qos(profile: QoSProfile) -> TopicQos:
                           profile.history.name, profile.depth)
 
 
-def recording_qos(offered: list[TopicQos]) -> QoSProfile:
+def recording_qos(offered: list[TopicQos], depth: int = RECORD_DEPTH) -> QoSProfile:
     """The subscription QoS that matches every offered profile and loses the least.
 
     Reliable only where every publisher is reliable (a reliable subscription gets nothing from a
@@ -86,7 +87,7 @@ def recording_qos(offered: list[TopicQos]) -> QoSProfile:
     reliable = all(q.reliability == 'reliable' for q in offered)
     latched = all(q.durability == 'transient_local' for q in offered)
     return QoSProfile(
-        depth=RECORD_DEPTH, history=HistoryPolicy.KEEP_LAST,
+        depth=depth, history=HistoryPolicy.KEEP_LAST,
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
@@ -140,7 +141,9 @@ class BagRecorder(GuardedCallbacks, Node):
             except ValueError as err:
                 self.get_logger().error(f'{topic} will not be recorded: {err}')
                 continue
-            qos = recording_qos(offered)
+            # every callback record: one lost is a callback the bag regression cannot replay
+            qos = recording_qos(offered, CALLBACK_LOG_QOS.depth if topic == CALLBACK_LOG_TOPIC
+                                else RECORD_DEPTH)
             self.create_guarded_subscription(
                 msg_class, topic, functools.partial(self.on_message, topic), qos, raw=True)
             self.get_logger().info(

@@ -11,14 +11,42 @@ A guarded callback reports a rejected input (any ``ValueError``, e.g. `InputErro
 throttled per kind of problem, and a bug (any other exception) as an error with its traceback;
 the node keeps running either way (`inflarm_msgs_json.ros.problems`). Subscriptions also log
 incompatible QoS offers, which otherwise drop every message silently.
+
+With the parameter ``callback_log`` true, each guarded subscription and timer callback, once
+it ran, publishes a `CallbackRecord` on ``/callback_log``: which callback, the node's clock
+when it began (``callback_time``, which a callback reads instead of the clock where the
+reading shapes an output) and which message it took. ``inflarm-bag-regression`` replays a bag
+of them callback by callback, in the recorded order, calling ``guarded_callbacks``.
 """
 
+from collections.abc import Callable
 import functools
+import zlib
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from std_msgs.msg import String
 
+from inflarm_msgs_json.messages import CALLBACK_LOG_TOPIC, CallbackRecord
+from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.problems import ProblemReporter
 from inflarm_msgs_json.ros.qos import subscription_events
+
+# Every record must reach the recorder: a lost one is a callback the replay cannot run.
+CALLBACK_LOG_QOS = QoSProfile(
+    depth=1000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
+)
+
+
+def message_key(msg: object) -> tuple[int | None, int | None]:
+    """(header stamp [ns] or None, CRC-32 of a ``std_msgs/String``'s text or None): what a
+    `CallbackRecord` names the message taken by."""
+    header = getattr(msg, 'header', None)
+    stamp = Time.from_msg(header.stamp).nanoseconds if header is not None else None
+    text = msg.data if isinstance(msg, String) else None
+    return stamp, None if text is None else zlib.crc32(text.encode())
 
 
 class GuardedCallbacks:
@@ -33,23 +61,64 @@ class GuardedCallbacks:
             if service.srv_type.__module__.startswith('lifecycle_msgs'):
                 service.callback = self.problems.guard_service(
                     service.srv_name, _transition_request(service.callback))
+        #: Callback name (as `CallbackRecord` names it) -> (message type or None for a timer,
+        #: the guarded callback).
+        self.guarded_callbacks: dict[str, tuple[type | None, Callable]] = {}
+        self._callback_log = None
+        self._callback_time: Time | None = None
+        if self.declare_parameter('callback_log', False, ParameterDescriptor(
+                description='publish a record of each callback on /callback_log, for '
+                'inflarm-bag-regression', read_only=True)).value:
+            self._callback_log = self.create_publisher(String, CALLBACK_LOG_TOPIC,
+                                                       CALLBACK_LOG_QOS)
 
     def create_guarded_subscription(self, msg_type, topic: str, callback, qos, **kwargs):
         """``create_subscription`` whose callback is guarded under the topic's name."""
         kwargs.setdefault('event_callbacks', subscription_events(self, topic))
-        return self.create_subscription(msg_type, topic, self.problems.guard(topic, callback),
-                                        qos, **kwargs)
+        name = self.resolve_topic_name(topic)
+        return self.create_subscription(
+            msg_type, topic, self._register(name, msg_type, self.problems.guard(topic, callback)),
+            qos, **kwargs)
 
     def create_guarded_timer(self, period_s: float, callback, name: str | None = None,
                              **kwargs):
         """``create_timer`` whose callback is guarded (problems named after ``name``)."""
         source = name or getattr(callback, '__name__', 'timer')
-        return self.create_timer(period_s, self.problems.guard(source, callback), **kwargs)
+        guarded = self.problems.guard(source, callback)
+        return self.create_timer(period_s, self._register(f'timer {source}', None, guarded),
+                                 **kwargs)
 
     def create_guarded_service(self, srv_type, name: str, callback, **kwargs):
         """``create_service``; a rejected request is answered with the reason."""
         return self.create_service(srv_type, name, self.problems.guard_service(name, callback),
                                    **kwargs)
+
+    def callback_time(self) -> Time:
+        """The node's clock when the running guarded callback began (else now): the time its
+        `CallbackRecord` gives, so an output computed from it replays exactly."""
+        return self._callback_time if self._callback_time is not None else (
+            self.get_clock().now())
+
+    def _register(self, name: str, msg_type: type | None, guarded: Callable) -> Callable:
+        def timed(*msg) -> Time:
+            self._callback_time = started = self.get_clock().now()
+            try:
+                guarded(*msg)
+            finally:
+                self._callback_time = None
+            return started
+
+        # a lifecycle node's re-created callback replaces the one destroyed
+        self.guarded_callbacks[name] = (msg_type, timed)
+        if self._callback_log is None:
+            return timed
+
+        def logged(*msg) -> None:
+            stamp, digest = message_key(msg[0]) if msg else (None, None)
+            started = timed(*msg)
+            self._callback_log.publish(to_string_msg(CallbackRecord(
+                self.get_fully_qualified_name(), name, started.nanoseconds, stamp, digest)))
+        return logged
 
 
 def _transition_request(callback):
