@@ -131,3 +131,29 @@ def test_objects_a_stop_request_left_half_built_do_not_report_at_exit(tmp_path, 
     assert run.returncode == 0, run.stderr
     assert 'built' not in run.stdout
     assert 'Exception ignored' not in run.stderr and 'Traceback' not in run.stderr, run.stderr
+
+
+# An import stopped between an extension taking an object over and its Python wrapper marking
+# it owned: what llvmlite's ExecutionEngine.add_module does (LLVMPY_AddModule, then
+# `module._owned = True`). Both would free the module: no finalizer may run after such a stop.
+OWNED_TWICE = """
+import os, signal
+class Module:
+    def __del__(self, write=os.write):
+        write(1, b'module freed by its wrapper')
+def add_module(module):
+    os.kill(os.getpid(), signal.SIGTERM)  # the handler runs as this call returns
+module = Module()
+add_module(module)
+module.owned = True
+def main():
+    print('main ran')
+"""
+
+
+def test_a_stop_request_during_the_imports_runs_no_finalizer(tmp_path):
+    run = run_entry_point(tmp_path, 'owned_twice', OWNED_TWICE)
+    assert run.returncode == 0, run.stderr
+    assert 'main ran' not in run.stdout
+    assert 'freed' not in run.stdout, run.stdout
+    assert 'Traceback' not in run.stderr, run.stderr

@@ -9,9 +9,13 @@ node's modules import is lost or ends in a traceback. Instead, every node execut
    then unblocks SIGINT and SIGTERM -- a parent that must not lose a stop request starts its
    children with both blocked (see ``inflarm_bringup.processes``), so one sent before the
    handlers exist waits for them instead of killing the interpreter;
-2. while it imports its node module and builds its nodes (`interruptible_startup`), a stop
-   request aborts that (`StartupInterrupted`) and the process exits 0 at once;
-3. from then on a stop request only sets a flag, from a watcher thread woken through
+2. while it imports its node module, a stop request ends the process at once with code 0
+   (``os._exit``): nothing is built yet, and no finalizer may run -- an import it interrupts
+   can leave an extension's object owned twice (llvmlite's ``ExecutionEngine.add_module``,
+   between handing the module to the engine and marking it owned), for two finalizers to free;
+3. while it builds its nodes (`interruptible_startup`), a stop request aborts that
+   (`StartupInterrupted`) and the process exits 0 once the middleware is shut down;
+4. from then on a stop request only sets a flag, from a watcher thread woken through
    ``signal.set_wakeup_fd`` (the main thread may be blocked in rcl's wait); the spin loop looks
    for it between waits (see ``inflarm_msgs_json.ros.spin``), returns between callbacks and
    the node is destroyed in order.
@@ -32,6 +36,7 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 STACKS_SIGNAL = signal.SIGUSR1  # prints every thread's stack to stderr: why a node hangs
 
 _stop = threading.Event()
+_exit_at_once = False
 _abort_startup = False
 _installed = False
 
@@ -44,6 +49,11 @@ class StartupInterrupted(BaseException):
 def _on_signal(signum: int, frame) -> None:
     global _abort_startup
     _stop.set()
+    if _exit_at_once:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(0)
     if _abort_startup:
         _abort_startup = False  # once: a second signal must not interrupt the exit
         raise StartupInterrupted(signal.Signals(signum).name)
@@ -120,9 +130,9 @@ def _ignore_unraisable(info) -> None:
 def interruptible_startup() -> Iterator[None]:
     """Within this block (main thread), a stop request raises `StartupInterrupted` at once.
 
-    For start-up work that holds nothing accepted yet: importing a node module, building the
-    nodes (a renderer, a model), which can take long. A stop request that came before the
-    block is raised on entry. Nested blocks are one window.
+    For start-up work that holds nothing accepted yet: building the nodes (a renderer, a
+    model), which can take long. A stop request that came before the block is raised on entry.
+    Nested blocks are one window.
 
     Where the exception lands in a C extension's callback, it cannot propagate: the extension
     reports it instead, through ``sys.unraisablehook`` ("Exception ignored in ...", seen in
@@ -160,19 +170,13 @@ def node_entry(module: str, function: str = 'main') -> Callable[[], None]:
     node module itself, whose imports (rclpy, numpy, Pinocchio) take about a second.
     """
     def entry() -> None:
+        global _exit_at_once
+        _exit_at_once = True
         try:
-            with interruptible_startup():
-                install_stop_handlers()
-                main = getattr(importlib.import_module(module), function)
-        except BaseException:
-            # Raised where the stop request found the import, it may arrive wrapped: a C
-            # extension whose initialisation it interrupted reports "ImportError:
-            # initialization failed".
-            if stop_requested():
-                sys.exit(0)
-            raise
-        if stop_requested():
-            sys.exit(0)
+            install_stop_handlers()  # a stop request sent before is delivered here
+            main = getattr(importlib.import_module(module), function)
+        finally:
+            _exit_at_once = False
         main()
 
     entry.__name__ = entry.__qualname__ = module.rsplit('.', 1)[-1]
