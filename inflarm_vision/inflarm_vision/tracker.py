@@ -19,8 +19,10 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    resolution and quantizes it coarsely, and the ball-blind channel is mostly chroma: where
    the fine pass finds less than 90 % of the outline, it is measured again in **luma** (full
    resolution; each ray's inside level measured, either polarity), the better kept; luma is
-   also the last resort of the coarse pass, and the coarse channel that of the fine pass. On
-   each ray the edge is where the signal crosses half-way between the inside and outside
+   also the last resort of the coarse pass, and the coarse channel that of the fine pass.
+   While the fine outline's centre moves a quarter pixel or more from its start, it is
+   measured again from there (twice at most: JPEG's chroma can put the rough centre a pixel
+   off). On each ray the edge is where the signal crosses half-way between the inside and outside
    levels (`_edges`); a ray counts only if it is inside the ball just before its edge. The
    edge points are moved out by the blur's shift of a curved edge, ``sigma^2 / (2 r)``.
 3. **Fit** (`_fit_outline`): a consensus circle through triples of edge points, least squares
@@ -31,7 +33,7 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    wins (the search stops at one with every ray on its outline). Where none is accepted, each
    is refined again from 1.3 times its radius (a shaded ball's blob can be half its disc),
    believed on 80 % of the outline.
-4. **Small balls** (under 8 px): where their rays give no accepted outline (a blur of a third
+4. **Small balls** (under 12 px): where their rays give no accepted outline (a blur of a third
    of the radius leaves too few samples for an edge's levels), the whole blurred disc is
    fitted to the ball-blind channel around the candidate (`_fit_disc`: a blurred ellipse on a
    sloping background, robust Levenberg-Marquardt), believed where 80 % of the rays from its
@@ -223,6 +225,9 @@ _DISC_MAX_BLUR = 0.4  # largest blur over radius (a blur near the radius rounds 
 _DISC_PROFILE_TOLERANCE = 0.2  # largest RMS misfit of a ray's profile, over the edge's step
 _DISC_EDGE_TOLERANCE_PX = 1.0  # largest distance of a ray's half-level from the model's [px]
 _DISC_MIN_CONFIDENCE = 0.8  # share of the rays that must agree with the fitted disc
+_DISC_MAX_RADIUS_PX = 12.0  # largest candidate whose disc is fitted where its rays fail [px]
+_MOVED_PX = 0.25  # a fine outline this far from its start is measured again from it [px]
+_FINE_REPEATS = 2  # at most this many times
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
 
 
@@ -927,8 +932,9 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
     """The ball's outline from a rough centre and radius: `_refine_at` with a search window
     widened by ``margin_px`` (the uncertainty of the guess; in the coarse channel, else, if
     that fails for want of edges, the ball-blind one, then luma), then `_fine` from that
-    outline's centre and radius with the narrow window. ``colour`` is the ball's (measured on
-    the disc when not given)."""
+    outline's centre and radius with the narrow window, again from its own centre while that
+    moves by `_MOVED_PX` or more; a candidate under `_DISC_MAX_RADIUS_PX` whose outline is not
+    accepted, `_fit_disc`. ``colour`` is the ball's (measured on the disc when not given)."""
     if colour is None:
         colour = _disc_colour(image, center, r0, params)
     small = r0 < _COARSE_MIN_RADIUS_PX
@@ -939,9 +945,20 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
         if first is not None:
             # the outline measured again with rays from its own centre: from an off-centre
             # start the rays meet a part of the outline more often than its share of it
-            fine = _fine(image, first.center, first.radius, colour, params, sigma=sigma)
+            start, fine = first.center, _fine(image, first.center, first.radius, colour, params,
+                                              sigma=sigma)
+            # and again from the fine outline's centre while that moves it (JPEG's chroma: the
+            # rough centre can be a pixel off), if no worse
+            for _ in range(_FINE_REPEATS):
+                if fine is None or math.hypot(*(fine.center - start)) < _MOVED_PX:
+                    break
+                again = _fine(image, fine.center, fine.radius, colour, params, sigma=sigma)
+                if again is None or again.confidence < fine.confidence or (
+                        _accept(fine, params) and not _accept(again, params)):
+                    break
+                start, fine = fine.center, again
             break
-    if small and not _accept(fine, params):
+    if r0 < _DISC_MAX_RADIUS_PX and not _accept(fine, params):
         disc = _fit_disc(image, center, r0, colour, params)
         if disc is not None and (fine is None or disc.confidence > fine.confidence):
             return disc
