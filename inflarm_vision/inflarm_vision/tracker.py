@@ -22,9 +22,9 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    also the last resort of the coarse pass, and the coarse channel that of the fine pass.
    While the fine outline's centre moves a quarter pixel or more from its start, it is
    measured again from there (twice at most: JPEG's chroma can put the rough centre a pixel
-   off). On each ray the edge is where the signal crosses half-way between the inside and outside
-   levels (`_edges`); a ray counts only if it is inside the ball just before its edge. The
-   edge points are moved out by the blur's shift of a curved edge, ``sigma^2 / (2 r)``.
+   off). On each ray the edge is where the signal crosses half-way between the inside and
+   outside levels (`_edges`); a ray counts only if it is inside the ball just before its edge.
+   The edge points are moved out by the blur's shift of a curved edge, ``sigma^2 / (2 r)``.
 3. **Fit** (`_fit_outline`): a consensus circle through triples of edge points, least squares
    through its points without the far ones, an ellipse when 85 % of the outline is on it.
    ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
