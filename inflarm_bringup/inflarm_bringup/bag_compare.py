@@ -5,15 +5,14 @@ are `inflarm_hw.bag.BagMessage` tuples, decoded on both sides by the ``rosbags``
 
 Matching. Messages with a header stamp on both sides are matched by stamp, the others by time
 (record time in the bag, publish time in the replay), among those of the same label (the kind
-and the text fields: a link's name, joint names, frames; a status the recorder lost does not
-shift the next link's onto it). Both sides are sorted by that key (stably) and merged: two
-messages match when their keys differ by at most half the median spacing of the replay's
-distinct keys (a callback publishes at one time: its messages share a key; else the recorded
-keys; by any amount with fewer than two), so that a stream at a fixed rate never pairs a message
-with its neighbour. The rest is unmatched, except replayed messages outside the compared
-recorded span by more than that (``outside``): a recorder sees a topic only while it is
-subscribed, the replay runs over the whole bag. Recorded messages before a topic's start
-(``starts``) are not compared (``skipped``); the replayed ones before it are outside.
+and the text fields: a link's name, joint names, frames), so that a status the recorder lost
+does not shift the next link's onto it. Both sides are sorted by that key (stably) and merged:
+two messages match when their keys differ by at most half the median spacing of the replay's
+distinct keys (else of the recorded keys; any amount with fewer than two), so that a stream at
+a fixed rate never pairs a message with its neighbour. Replayed messages more than that outside
+the compared recorded span (``outside``) are not counted: a recorder sees a topic only while it
+is subscribed, the replay runs over the whole bag. Recorded messages before a topic's start
+(``starts``) are not compared; the replayed ones before it are outside.
 
 Fields. A message's leaves (`flatten`) are grouped by field; a group has a quantity
 (`QUANTITIES`) or must be equal. A leaf on one side only, a ``null`` against a number or
@@ -59,7 +58,7 @@ QUANTITIES: Mapping[tuple[str, str], str] = {
 #: Unit of each quantity, for the report.
 UNITS: Mapping[str, str] = {
     'position': 'm|rad', 'velocity': 'm/s|rad/s', 'force': 'N', 'torque': 'N m',
-    'pressure': 'Pa', 'time': 's', 'ratio': '1', 'exact': '', 'unmatched': 'share',
+    'pressure': 'Pa', 'time': 's', 'exact': '', 'unmatched': 'share',
 }
 
 
@@ -83,9 +82,8 @@ class Tolerances:
 
     def of(self, topic: str, quantity: str) -> float:
         """The tolerance of ``quantity`` on ``topic`` (the topic's own, else the quantity's)."""
-        if quantity == 'exact':
-            return 0.0
-        return float(self.values.get(f'{topic}:{quantity}', self.values.get(quantity, 0.0)))
+        return 0.0 if quantity == 'exact' else float(
+            self.values.get(f'{topic}:{quantity}', self.values.get(quantity, 0.0)))
 
     def updated(self, specs: Iterable[str]) -> 'Tolerances':
         """These tolerances with ``specs`` (``'[TOPIC:]QUANTITY=VALUE'``) applied.
@@ -113,24 +111,19 @@ class Tolerances:
 #: best-effort recorder lost: a changed node fails its fields instead.
 DEFAULT_TOLERANCES = Tolerances({
     'position': 1e-4, 'velocity': 1e-3, 'force': 1e-3, 'torque': 1e-3, 'pressure': 100.0,
-    'time': 0.25, 'ratio': 1e-4, 'unmatched': 0.05,
+    'time': 0.25, 'unmatched': 0.05,
 })
 
 
 @dataclass(frozen=True)
 class FieldDifference:
-    """The largest difference of one field group over the matched messages of a topic.
+    """The largest difference of one field group over the matched messages of a topic."""
 
-    group : str (``'wrench.force'``); quantity : str (`UNITS`); max_abs_diff : float [SI]
-    (inf: a value on one side only, or unequal text); tolerance : float; worst_key_ns : int,
-    the match key (stamp or time [ns]) of the recorded message where it is largest.
-    """
-
-    group: str
-    quantity: str
-    max_abs_diff: float
+    group: str  # 'wrench.force'
+    quantity: str  # of UNITS
+    max_abs_diff: float  # [SI]; inf: a value on one side only, or unequal text
     tolerance: float
-    worst_key_ns: int
+    worst_key_ns: int  # the match key (stamp or time [ns]) of the recorded message where largest
 
     @property
     def passed(self) -> bool:
@@ -151,7 +144,6 @@ class TopicComparison:
     outside: int = 0  # replayed messages outside the recorded span: not matched, not counted
     fields: tuple[FieldDifference, ...] = ()
     problems: tuple[str, ...] = ()  # messages that could not be decoded, type mismatches
-    skipped: int = 0  # recorded messages in the start-up period: not compared, not counted
 
     @property
     def unmatched_share(self) -> float:
@@ -160,9 +152,7 @@ class TopicComparison:
 
     @property
     def passed(self) -> bool:
-        return (not self.problems and self.unmatched_share <= self.unmatched_tolerance
-                and (self.matched > 0 or self.recorded == self.replayed == 0)
-                and all(f.passed for f in self.fields))
+        return not self.failures()
 
     def failures(self) -> list[str]:
         """What is out of tolerance, in words."""
@@ -199,9 +189,6 @@ class Report:
     def passed(self) -> bool:
         return bool(self.topics) and all(t.passed for t in self.topics)
 
-    def failed_topics(self) -> list[str]:
-        return [t.topic for t in self.topics if not t.passed]
-
     def rows(self) -> list[dict[str, object]]:
         """One row per topic and field group (a topic without fields: one row), `_CSV`'s keys."""
         return [dict(zip(_CSV, (
@@ -220,21 +207,13 @@ class Report:
                                     for i, (c, w) in enumerate(zip(line, widths, strict=True))
                                     ).rstrip() for line in lines] + self._summary())
 
-    def markdown(self) -> str:
-        """The report as a markdown table, then the failures."""
-        text = ['| ' + ' | '.join(h.replace('|', '\\|') for h in _HEADER) + ' |',
-                '|' + ' --- |' * len(_HEADER)]
-        text += ['| ' + ' | '.join((f'`{topic}`', *cells, 'ok' if ok == 'ok' else '**FAIL**'))
-                 + ' |' for topic, *cells, ok in self._cells()]
-        return '\n'.join(text + [''] + [f'- {line}' for line in self._summary()]) + '\n'
-
     def csv(self) -> str:
         """The report's rows as CSV (max_abs_diff and tolerance in the unit column's unit)."""
         out = io.StringIO()
         writer = csv.DictWriter(out, fieldnames=_CSV)
         writer.writeheader()
-        for row in self.rows():
-            writer.writerow({k: repr(v) if isinstance(v, float) else v for k, v in row.items()})
+        writer.writerows({k: repr(v) if isinstance(v, float) else v for k, v in row.items()}
+                         for row in self.rows())
         return out.getvalue()
 
     def _cells(self) -> list[list[str]]:
@@ -252,7 +231,8 @@ class Report:
         elif not self.topics:
             lines.append('FAIL: no topic to compare')
         else:
-            lines.append(f"FAIL: {', '.join(self.failed_topics())} out of tolerance")
+            failed = ', '.join(t.topic for t in self.topics if not t.passed)
+            lines.append(f'FAIL: {failed} out of tolerance')
         return lines
 
 
@@ -348,9 +328,7 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
     # one key keep the order they were recorded or published in.
     a, b = (sorted(((stamp_ns(msg) if by_stamp else m.timestamp_ns, *flatten(msg, m.msgtype))
                     for m, msg in side), key=lambda d: d[0]) for side in (rec, rep))
-    skipped = 0
     if start_ns is not None:
-        skipped = sum(d[0] < start_ns for d in a)
         a = [d for d in a if d[0] >= start_ns]  # the replayed ones before: outside
     # The replay publishes a callback's messages at its one time, the recorder takes them in
     # spread out: the spacing of the replay's distinct keys is the rate's.
@@ -393,13 +371,13 @@ def _compare_topic(topic: str, recorded: Sequence[BagMessage], replayed: Sequenc
         for group, (quantity, diff, key) in sorted(worst.items()))
     return TopicComparison(topic, types[0] if types else '', 'stamp' if by_stamp else 'time',
                            len(a), len(b) + outside, matched, tolerances.of(topic, 'unmatched'),
-                           outside, differences, tuple(problems), skipped)
+                           outside, differences, tuple(problems))
 
 
 def compare(recorded: Iterable[BagMessage], replayed: Iterable[BagMessage],
             tolerances: Tolerances = DEFAULT_TOLERANCES, topics: Sequence[str] | None = None,
             starts: Mapping[str, int] | None = None) -> Report:
-    """Compare recorded with replayed messages, topic by topic.
+    """Compare recorded with replayed messages, topic by topic (module docstring).
 
     Parameters
     ----------
@@ -407,14 +385,9 @@ def compare(recorded: Iterable[BagMessage], replayed: Iterable[BagMessage],
         From a bag (`inflarm_hw.bag.read_messages`) and a replay (``Replay.outputs``).
     tolerances : Tolerances
     topics : sequence of str, optional
-        The topics to compare; default: those on both sides. A topic named here that is on one
-        side only fails (nothing matches).
+        The topics to compare (one on one side only fails); default: those on both sides.
     starts : mapping of str to int, optional
         Topic -> the start of its comparison [ns] (in its match key: stamp or time).
-
-    Returns
-    -------
-    Report
     """
     by_topic: dict[str, tuple[list[BagMessage], list[BagMessage]]] = {}
     for side, messages in ((0, recorded), (1, replayed)):

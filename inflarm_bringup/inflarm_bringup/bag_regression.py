@@ -1,10 +1,5 @@
 """``inflarm-bag-regression``: replay a recorded run's callbacks into the estimation and control
-nodes and compare their outputs with the recorded ones.
-
-Usage::
-
-    inflarm-bag-regression BAG [--nodes load_estimator,elastostatic_ik,pressure_controller]
-                               [--params-file F ...] [--out DIR] [--tolerance SPEC ...]
+nodes and compare their outputs with the recorded ones (``--help``).
 
 BAG is a rosbag2 directory (sqlite3 or MCAP) of a run whose nodes under test had the parameter
 ``callback_log`` true: each published a `inflarm_msgs_json.CallbackRecord` per callback on
@@ -25,10 +20,8 @@ same messages in the same order and its timers fire when they fired. A record wh
 in neither is skipped and counted: the recorder had not yet subscribed, or lost it. Not
 replayed: service calls, and when a background job finished (in simulated time computing takes
 none). The first ``--skip-start-s`` after each node's first recorded output are not compared:
-what a node took before the recorder subscribed is not in the bag.
-
-Comparison: `inflarm_bringup.bag_compare`. ``--out DIR`` writes the replayed outputs as a bag
-(``DIR/replayed``) and the report (``DIR/report.md``, ``DIR/report.csv``).
+what a node took before the recorder subscribed is not in the bag. Comparison:
+`inflarm_bringup.bag_compare`.
 """
 
 import argparse
@@ -52,47 +45,25 @@ __all__ = [
     'SKIP_START_S',
     'Replay',
     'callback_records',
-    'default_params_files',
     'main',
     'regression',
     'replay',
-    'start_times',
 ]
 
 PROG = 'inflarm-bag-regression'
-#: Node name -> its class, as ``'module:Class'``.
-NODES: Mapping[str, str] = {
-    'load_estimator': 'inflarm_estimation.nodes.load_estimator:LoadEstimator',
-    'elastostatic_ik': 'inflarm_control.nodes.elastostatic_ik:ElastostaticIk',
-    'pressure_controller': 'inflarm_control.nodes.pressure_controller:PressureController',
-}
+#: The nodes that can be tested, as the simulated system runs them (``inflarm_bringup.systems``).
+NODES = ('load_estimator', 'elastostatic_ik', 'pressure_controller')
 #: The start-up not compared by default [s]: from each node's first recorded output.
 SKIP_START_S = 1.0
 
 
 @dataclass(frozen=True)
 class Replay:
-    """A replay's outcome.
+    """A replay's outcome: the nodes under test and each one's parameter files, in order; input
+    topic -> messages taken from the bag; node -> callbacks run; the records skipped, with their
+    node (their message is in neither the bag nor the replay); everything the nodes published,
+    in order, stamped with the simulated time [ns]."""
 
-    Attributes
-    ----------
-    bag : pathlib.Path
-    nodes : tuple of NodeIo
-        The nodes under test.
-    params_files : mapping of str to tuple of str
-        Node name -> the parameter files it was built with, in order.
-    inputs : mapping of str to int
-        Input topic -> messages taken from the bag.
-    callbacks : mapping of str to int
-        Node name -> callbacks run.
-    skipped : tuple of (str, CallbackRecord)
-        The records not run, with their node: their message is in neither the bag nor the
-        replay.
-    outputs : tuple of BagMessage
-        Everything the nodes published, in order, stamped with the simulated time [ns].
-    """
-
-    bag: pathlib.Path
     nodes: tuple[NodeIo, ...]
     params_files: Mapping[str, tuple[str, ...]]
     inputs: Mapping[str, int]
@@ -106,28 +77,17 @@ class Replay:
         return sorted({t for io in self.nodes for t in io.compared_outputs})
 
 
-def default_params_files(name: str) -> list[str]:
-    """The parameter files the simulated system starts node ``name`` with, in order."""
-    from inflarm_bringup.systems import sim
-
-    for node in sim():
-        if node.executable == name:
-            return node.parameter_files()
-    raise ValueError(f'{name} is not a node of the simulated system')
-
-
 def callback_records(bag: str | os.PathLike) -> dict[str, list[CallbackRecord]]:
     """Node name (without namespace) -> its `CallbackRecord`s in ``bag``, in record order.
 
     Raises
     ------
     ValueError
-        When the bag holds no ``/callback_log`` or a record that does not decode.
+        When a record does not decode.
     """
-    if CALLBACK_LOG_TOPIC not in bag_info(bag).topics:
-        raise ValueError(f'the bag holds no {CALLBACK_LOG_TOPIC}: record the run with the '
-                         'parameter callback_log true on the nodes under test')
     records: dict[str, list[CallbackRecord]] = {}
+    if CALLBACK_LOG_TOPIC not in bag_info(bag).topics:
+        return records
     for m in read_messages(bag, [CALLBACK_LOG_TOPIC]):
         try:
             record = decode(deserialize(m.data, m.msgtype).data, expected=CallbackRecord)
@@ -166,29 +126,30 @@ def replay(bag: str | os.PathLike, nodes: Sequence[str] | None = None,
         if not os.path.isfile(f):
             raise ValueError(f'parameter file {f!r} does not exist')
     records = callback_records(bag)
-    if nodes is None:
-        names = [n for n in NODES if n in records]
-        if not names:
-            raise ValueError(f'the bag holds no {CALLBACK_LOG_TOPIC} records of any of '
-                             f'{list(NODES)}; it holds those of {sorted(records)}')
-    else:
-        names = list(dict.fromkeys(nodes))
-        unknown = [n for n in names if n not in NODES]
-        if unknown or not names:
-            raise ValueError(f'unknown nodes {unknown}: expected some of {list(NODES)}')
-        lacking = [n for n in names if n not in records]
-        if lacking:
-            raise ValueError(f'the bag holds no {CALLBACK_LOG_TOPIC} records of {lacking}: '
-                             'record the run with the parameter callback_log true on them')
-    node_files = {n: tuple([*default_params_files(n), *files]) for n in names}
+    names = [n for n in NODES if n in records] if nodes is None else list(dict.fromkeys(nodes))
+    unknown = [n for n in names if n not in NODES]
+    if unknown or (nodes is not None and not names):
+        raise ValueError(f'unknown nodes {unknown}: expected some of {list(NODES)}')
+    lacking = [n for n in names if n not in records] if names else list(NODES)
+    if lacking:
+        raise ValueError(f'the bag holds no {CALLBACK_LOG_TOPIC} records of {lacking}: record '
+                         'the run with the parameter callback_log true on them')
+    from inflarm_bringup.launcher import node_class
     from inflarm_bringup.ros.lockstep import LockstepNodes
+    from inflarm_bringup.systems import sim
 
-    with LockstepNodes({n: NODES[n] for n in names}, node_files) as nodes_under_test:
-        ios = tuple(nodes_under_test.io(n) for n in names)
-        _check_types(ios, {t: i.msgtype for t, i in info.topics.items()})
+    system = {node.executable: node for node in sim()}
+    node_files = {n: (*system[n].parameter_files(), *files) for n in names}
+    with LockstepNodes({n: node_class(system[n]) for n in names}, node_files) as under_test:
+        ios = tuple(under_test.io(n) for n in names)
+        for io in ios:
+            for topic, msgtype in {**io.inputs, **io.outputs}.items():
+                if topic in info.topics and info.topics[topic].msgtype != msgtype:
+                    raise ValueError(f'{topic} holds {info.topics[topic].msgtype} in the bag, '
+                                     f'but {io.name} takes or publishes it as {msgtype}')
         for name in names:
             unknown = {r.callback for r in records[name]} - set(
-                nodes_under_test.nodes[name].guarded_callbacks)
+                under_test.nodes[name].guarded_callbacks)
             if unknown:
                 raise ValueError(f'{name} has no callbacks {sorted(unknown)} that the bag '
                                  'records: was the run started with other parameters?')
@@ -198,22 +159,8 @@ def replay(bag: str | os.PathLike, nodes: Sequence[str] | None = None,
             recorded.setdefault(m.topic, []).append(m)
         ordered = sorted(((n, r) for n in names for r in records[n]),
                          key=lambda item: item[1].time_ns)  # stable: each node's own order
-        callbacks, skipped = nodes_under_test.run(ordered, recorded)
-        outputs = tuple(nodes_under_test.outputs)
-    produced = {t for io in ios for t in io.outputs}
-    taken = Counter(r.callback for _, r in ordered
-                    if r.callback in recorded and r.callback not in produced)
-    taken -= Counter(r.callback for _, r in skipped)
-    return Replay(pathlib.Path(bag), ios, {n: node_files[n] for n in names}, dict(taken),
-                  callbacks, tuple(skipped), outputs)
-
-
-def _check_types(ios: Sequence[NodeIo], bag_topics: Mapping[str, str]) -> None:
-    for io in ios:
-        for topic, msgtype in {**io.inputs, **io.outputs}.items():
-            if topic in bag_topics and bag_topics[topic] != msgtype:
-                raise ValueError(f'{topic} holds {bag_topics[topic]} in the bag, but '
-                                 f'{io.name} takes or publishes it as {msgtype}')
+        callbacks, inputs, skipped = under_test.run(ordered, recorded)
+        return Replay(ios, node_files, inputs, callbacks, skipped, tuple(under_test.outputs))
 
 
 def regression(bag: str | os.PathLike, result: Replay,
@@ -221,19 +168,7 @@ def regression(bag: str | os.PathLike, result: Replay,
                skip_start_s: float = SKIP_START_S) -> Report:
     """Compare the replay ``result`` with the outputs recorded in ``bag``: every compared
     output topic of the nodes under test that the bag holds, each from ``skip_start_s`` [s]
-    after its node's first recorded output (`start_times`)."""
-    info = bag_info(bag)
-    topics = [t for t in result.compared_topics if t in info.topics]
-    starts = start_times(bag, result.nodes, skip_start_s)
-    report = compare(read_messages(bag, topics), result.outputs, tolerances, topics, starts)
-    not_compared = tuple(t for t in result.compared_topics if t not in info.topics)
-    return Report(report.topics, not_compared)
-
-
-def start_times(bag: str | os.PathLike, nodes: Sequence[NodeIo],
-                skip_start_s: float = SKIP_START_S) -> dict[str, int]:
-    """Output topic -> when its comparison starts [ns]: ``skip_start_s`` after the first
-    output of its node recorded in ``bag``.
+    after its node's first recorded output.
 
     Raises
     ------
@@ -244,16 +179,17 @@ def start_times(bag: str | os.PathLike, nodes: Sequence[NodeIo],
             and skip_start_s >= 0):
         raise ValueError(f'skip_start_s: expected a finite number >= 0 [s], got '
                          f'{skip_start_s!r}')
-    info = bag_info(bag)
+    in_bag = bag_info(bag).topics
+    topics = [t for t in result.compared_topics if t in in_bag]
+    recorded = list(read_messages(bag, topics))
     starts = {}
-    for io in nodes:
-        topics = [t for t in io.compared_outputs if t in info.topics]
-        first = min((m.timestamp_ns for m in read_messages(bag, topics)), default=None) \
-            if topics else None
+    for io in result.nodes:
+        first = min((m.timestamp_ns for m in recorded if m.topic in io.compared_outputs),
+                    default=None)
         if first is not None:
-            for t in io.compared_outputs:
-                starts[t] = first + round(skip_start_s * 1e9)
-    return starts
+            starts.update(dict.fromkeys(io.compared_outputs, first + round(skip_start_s * 1e9)))
+    report = compare(recorded, result.outputs, tolerances, topics, starts)
+    return Report(report.topics, tuple(t for t in result.compared_topics if t not in in_bag))
 
 
 def write_outputs(out: pathlib.Path, bag: str | os.PathLike, result: Replay,
@@ -269,7 +205,7 @@ def write_outputs(out: pathlib.Path, bag: str | os.PathLike, result: Replay,
         for m in result.outputs:
             writer.write(m.topic, m.timestamp_ns, m.data)
     (out / 'report.md').write_text(f'# Bag regression of `{bag}`\n\n{describe(result)}\n\n'
-                                   f'{report.markdown()}', encoding='utf-8')
+                                   f'```\n{report.table()}\n```\n', encoding='utf-8')
     (out / 'report.csv').write_text(report.csv(), encoding='utf-8')
 
 
@@ -333,9 +269,6 @@ def _compare(args: argparse.Namespace) -> int:
     if out is not None and (out / 'replayed').exists():
         raise ValueError(f"--out: {str(out / 'replayed')!r} exists: a bag is never "
                          'written over')
-    if not (np.isfinite(args.skip_start_s) and args.skip_start_s >= 0):
-        raise ValueError(f'--skip-start-s: expected a number >= 0 [s], got '
-                         f'{args.skip_start_s!r}')
     result = replay(args.bag, nodes, args.params_file)
     report = regression(args.bag, result, tolerances, args.skip_start_s)
     print(f'{PROG}: {args.bag}\n{describe(result)}\n')

@@ -10,17 +10,15 @@ simulated time. A node's background jobs (`LatestJobWorker`) are waited for afte
 from collections import Counter, defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 import contextlib
-import importlib
 import os
 
-import numpy as np
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.time import Time
 
 from inflarm_bringup.node_io import INFRASTRUCTURE_TOPICS, NodeIo
@@ -31,125 +29,56 @@ from inflarm_msgs_json.ros.worker import LatestJobWorker
 
 __all__ = ['LockstepNodes', 'msgtype_of', 'to_cdr']
 
-_DTYPES = {
-    'float': np.float32, 'double': np.float64, 'long double': np.float64, 'char': np.uint8,
-    'wchar': np.uint16, 'boolean': np.bool_, 'octet': np.uint8, 'uint8': np.uint8,
-    'int8': np.int8, 'uint16': np.uint16, 'int16': np.int16, 'uint32': np.uint32,
-    'int32': np.int32, 'uint64': np.uint64, 'int64': np.int64,
-}
-
 
 def msgtype_of(cls: type) -> str:
     """``'sensor_msgs/msg/JointState'`` for the rclpy class ``sensor_msgs.msg.JointState``."""
     return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
 
 
-def _scalar(value: object, typename: str) -> object:
-    if isinstance(value, bytes):  # octet/byte fields hold 1-byte bytes in rclpy
-        return value[0]
-    if typename == 'char' and isinstance(value, str):
-        return ord(value)
-    return value
-
-
-def _to_rosbags(msg: object, msgtype: str) -> object:
-    values = {}
-    for (name, _), slot in zip(type(msg).get_fields_and_field_types().items(),
-                               type(msg).SLOT_TYPES, strict=True):
-        values[name] = _convert(getattr(msg, name), slot)
-    return typestore().types[msgtype](**values)
-
-
-def _convert(value: object, slot: object) -> object:
-    # slot: the field's rosidl_parser.definition type (SLOT_TYPES), told apart by attributes.
-    if hasattr(slot, 'namespaces'):  # NamespacedType: a nested message
-        return _to_rosbags(value, '/'.join([*slot.namespaces, slot.name]))
-    if hasattr(slot, 'value_type'):  # Array, BoundedSequence, UnboundedSequence
-        inner = slot.value_type
-        if hasattr(inner, 'typename'):  # of a BasicType
-            if isinstance(value, (bytes, bytearray)):
-                return np.frombuffer(bytes(value), dtype=np.uint8).copy()
-            items = [_scalar(v, inner.typename) for v in value]
-            return np.asarray(items, dtype=_DTYPES[inner.typename])
-        return [_convert(v, inner) for v in value]
-    if hasattr(slot, 'typename'):  # BasicType
-        return _scalar(value, slot.typename)
-    return value  # strings
-
-
 def to_cdr(msg: object) -> bytes:
     """Canonical CDR of an rclpy message, as a raw subscription would receive it.
 
-    ``rclpy.serialization.serialize_message`` leaves uninitialized padding and an over-estimated
-    length (``ROS_NOTES.md``): its bytes differ from run to run. This converts the message
-    field by field to a ``rosbags`` message and serializes that.
+    ``rclpy.serialization.serialize_message`` leaves uninitialized padding and may over-estimate
+    the length (``ROS_NOTES.md``): its bytes differ from run to run, and rosbags' decoder
+    refuses the longer ones. They are decoded here without that length check, then encoded.
     """
-    msgtype = msgtype_of(type(msg))
-    return bytes(typestore().serialize_cdr(_to_rosbags(msg, msgtype), msgtype))
+    msgtype, store = msgtype_of(type(msg)), typestore()
+    raw = serialize_message(msg)
+    msgdef = store.get_msgdef(msgtype)
+    decode = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
+    return bytes(store.serialize_cdr(decode(raw[4:], 0, msgdef.cls, store)[0], msgtype))
 
 
-@contextlib.contextmanager
-def _discovery_off():
-    """rcl reads ROS_AUTOMATIC_DISCOVERY_RANGE when a context is initialized."""
-    old = os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'OFF'
-    try:
-        yield
-    finally:
-        if old is None:
-            del os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']
-        else:
-            os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = old
+class LockstepNodes(contextlib.AbstractContextManager):
+    """Nodes built for a replay from ``classes`` (node name -> node class) and ``params_files``
+    (node name -> its parameter files, in the order they apply); a context manager that destroys
+    them on exit. Raises ValueError naming the node and the reason when one cannot be built."""
 
-
-def node_class(path: str) -> type[Node]:
-    """The class at ``'package.module:Class'``."""
-    module, _, name = path.partition(':')
-    return getattr(importlib.import_module(module), name)
-
-
-def _by_key(messages: Iterable[BagMessage], msg_type: type) -> dict[tuple, list[bytes]]:
-    """``{(stamp, digest): [CDR, ...]}`` of ``messages`` (`message_key`), in their order."""
-    index: dict[tuple, list[bytes]] = defaultdict(list)
-    for m in messages:
-        index[message_key(deserialize_message(m.data, msg_type))].append(m.data)
-    return index
-
-
-class LockstepNodes:
-    """Nodes built for a replay; a context manager that destroys them on exit.
-
-    Parameters
-    ----------
-    classes : mapping of str to str
-        Node name -> ``'package.module:Class'`` (a node class taking ``**kwargs``).
-    params_files : mapping of str to sequence of str
-        Node name -> its parameter files, in the order they apply.
-
-    Raises
-    ------
-    ValueError
-        When a node cannot be built from its parameters (the node and the reason named).
-    """
-
-    def __init__(self, classes: Mapping[str, str],
+    def __init__(self, classes: Mapping[str, type[Node]],
                  params_files: Mapping[str, Sequence[str]]) -> None:
         self.context = rclpy.Context()
-        with _discovery_off():
+        # rcl reads the discovery range when a context is initialized.
+        discovery = os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'OFF'
+        try:
             rclpy.init(context=self.context, args=[])
+        finally:
+            os.environ.pop('ROS_AUTOMATIC_DISCOVERY_RANGE')
+            if discovery is not None:
+                os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = discovery
         self.nodes: dict[str, Node] = {}
         #: What the nodes published, in order, stamped with the simulated time.
         self.outputs: list[BagMessage] = []
         self._published: dict[tuple, list[bytes]] = defaultdict(list)  # by (topic, *key)
         self._now_ns = 0
         try:
-            for name, path in classes.items():
-                self.nodes[name] = self._build(name, path, params_files.get(name, ()))
+            for name, cls in classes.items():
+                self.nodes[name] = self._build(name, cls, params_files.get(name, ()))
         except BaseException:
             self.close()
             raise
 
-    def _build(self, name: str, path: str, files: Sequence[str]) -> Node:
+    def _build(self, name: str, cls: type[Node], files: Sequence[str]) -> Node:
         replay = self
 
         class Captured(Publisher):
@@ -159,13 +88,11 @@ class LockstepNodes:
                 else:
                     replay._capture(self.topic_name, msg)
 
-        class Replayed(node_class(path)):
+        class Replayed(cls):
             def create_publisher(self, *args, **kwargs) -> Publisher:
                 return super().create_publisher(*args, **kwargs, publisher_class=Captured)
 
-        args = ['--ros-args']
-        for file in files:
-            args += ['--params-file', str(file)]
+        args = ['--ros-args', *(a for file in files for a in ('--params-file', str(file)))]
         try:
             return Replayed(context=self.context, cli_args=args, use_global_arguments=False,
                             parameter_overrides=[Parameter('use_sim_time', value=True),
@@ -191,22 +118,13 @@ class LockstepNodes:
 
     def run(self, records: Iterable[tuple[str, CallbackRecord]],
             recorded: Mapping[str, Sequence[BagMessage]]
-            ) -> tuple[dict[str, int], list[tuple[str, CallbackRecord]]]:
-        """Run the callbacks ``records`` name, in their order.
+            ) -> tuple[dict[str, int], dict[str, int], tuple[tuple[str, CallbackRecord], ...]]:
+        """Run the callbacks that ``records`` (node name and record, in time order) name.
 
-        Parameters
-        ----------
-        records : iterable of (str, CallbackRecord)
-            Node name and record, in time order.
-        recorded : mapping of str to sequence of BagMessage
-            Input topic -> the bag's messages, in record order. A subscription callback takes
-            the first message of its topic with the record's stamp and digest that a node
-            under test published, else that the bag holds; each node takes each once.
-
-        Returns
-        -------
-        dict of str to int, list of (str, CallbackRecord)
-            Node name -> callbacks run; the records skipped (their message in neither).
+        A subscription callback takes the node's next message of its topic with the record's
+        stamp and digest that a node under test published, else that the bag holds (``recorded``:
+        input topic -> messages in record order). Returns node name -> callbacks run, input topic
+        -> messages taken from the bag, and the records skipped (their message in neither).
         """
         workers = {name: [w for w in vars(node).values() if isinstance(w, LatestJobWorker)]
                    for name, node in self.nodes.items()}
@@ -214,6 +132,7 @@ class LockstepNodes:
         inputs: dict[tuple[str, type], dict[tuple, list[bytes]]] = {}
         taken: Counter[tuple] = Counter()  # (node, (topic, stamp, digest)) -> messages taken
         ran = Counter({name: 0 for name in self.nodes})
+        from_bag: Counter[str] = Counter()
         skipped = []
         for name, record in records:
             node = self.nodes[name]
@@ -225,31 +144,30 @@ class LockstepNodes:
             else:
                 key = (record.callback, record.stamp_ns, record.digest)
                 if (record.callback, msg_type) not in inputs:
-                    inputs[(record.callback, msg_type)] = _by_key(
-                        recorded.get(record.callback, ()), msg_type)
+                    index = inputs[(record.callback, msg_type)] = defaultdict(list)
+                    for m in recorded.get(record.callback, ()):
+                        index[message_key(deserialize_message(m.data, msg_type))].append(m.data)
                 # the node's n-th message of this key: replayed if a node published it
                 n = taken[(name, key)]
                 source = self._published.get(key, [])
                 if n >= len(source):
                     source = inputs[(record.callback, msg_type)].get(key[1:], [])
-                if n >= len(source):
-                    skipped.append((name, record))
-                    continue
+                    if n >= len(source):
+                        skipped.append((name, record))
+                        continue
+                    from_bag[record.callback] += 1
                 taken[(name, key)] += 1
                 callback(deserialize_message(source[n], msg_type))
             for worker in workers[name]:
                 worker.wait()
             ran[name] += 1
-        return dict(ran), skipped
+        return dict(ran), dict(from_bag), tuple(skipped)
 
     def close(self) -> None:
         for node in self.nodes.values():
             node.destroy_node()
         self.nodes.clear()
         rclpy.try_shutdown(context=self.context)
-
-    def __enter__(self) -> 'LockstepNodes':
-        return self
 
     def __exit__(self, *exc_info) -> None:
         self.close()
