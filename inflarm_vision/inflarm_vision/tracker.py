@@ -93,7 +93,8 @@ class DetectorParams:
         about 10) and lime (about 47) are out, so are pale yellows and dark browns (S < 130:
         a yellow ball's saturation, about 0.9, does not change with its shading).
     min_radius_px, max_radius_px : float
-        Range of apparent radii [px].
+        Range of apparent radii [px]. An outline found whole may measure up to 0.5 px under
+        ``min_radius_px`` (a ball of a few pixels is measured that coarsely).
     min_circularity : float
         Smallest ``4 pi A / P^2`` of a blob whose centroid is a candidate (1 for a disc, pi / 4
         for a square; a pixel contour scores less than its shape). Any blob's largest inscribed
@@ -215,6 +216,9 @@ _RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discrimina
 _LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BGR order
 _MIN_LUMA_CONTRAST = 10.0  # smallest step of luma across an edge of the luma pass [grey levels]
 _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures it again
+# how far under min_radius_px the fitted radius of an outline found whole (`_CONFIDENT`) may
+# be [px]: a ball of a few pixels, in JPEG, measures that much smaller or larger than it is
+_RADIUS_TOLERANCE_PX = 0.5
 _RETRY_SCALE = 1.3  # radius of a refused candidate's second refinement, over its blob's
 _RETRY_MIN_CONFIDENCE = 0.8  # share of the outline that second refinement must find ...
 _RETRY_MIN_ARC_PX = 100.0  # ... or this much of it (80 % of a 20 px ball's), if >= min_confidence
@@ -905,9 +909,14 @@ def _one_hidden_arc(inliers: npt.NDArray[np.bool_], max_hidden: float) -> bool:
 
 
 def _accept(detection: BallDetection | None, params: DetectorParams) -> bool:
-    return (detection is not None and detection.confidence >= params.min_confidence
+    if detection is None:
+        return False
+    # a ball of about min_radius_px, found whole, may measure a little under it
+    min_radius = params.min_radius_px - (_RADIUS_TOLERANCE_PX if detection.confidence
+                                         >= _CONFIDENT else 0.0)
+    return (detection.confidence >= params.min_confidence
             and detection.axes[0] <= params.max_aspect_ratio * detection.axes[1]
-            and params.min_radius_px <= detection.radius <= params.max_radius_px)
+            and min_radius <= detection.radius <= params.max_radius_px)
 
 
 def _disc_colour(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], radius: float,

@@ -168,3 +168,15 @@ def test_a_ball_of_8_to_12_px_whose_rays_fail_is_found_from_its_whole_disc(seed,
     assert centre_error(case) < 0.5
     monkeypatch.setattr(tracker, '_DISC_MAX_RADIUS_PX', 8.0)
     assert centre_error(case) >= 1.0
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(284, 75), (284, None), (72, None)])
+def test_a_whole_outline_just_under_the_smallest_radius_is_a_ball(seed, quality, monkeypatch):
+    # balls of 4.1-4.3 px (the spec's smallest: 4) whose whole outline is found 0.4 px from
+    # the truth, with a radius of 3.9-4.0 px
+    case = real_case(seed, quality)
+    assert case.radius < 4.5
+    assert centre_error(case) < 0.5
+    assert detect_ball(case.image).radius < DetectorParams().min_radius_px
+    monkeypatch.setattr(tracker, '_RADIUS_TOLERANCE_PX', 0.0)
+    assert centre_error(case) >= 1.0
