@@ -110,6 +110,13 @@ def record_run(node_processes, executor, bag: pathlib.Path, params_file: pathlib
     assert spin_until(executor, lambda: reports and len(commands) > commands_before + 100,
                       timeout_s=TRIAL_S + 15.0), node_processes.output()
     spin_until(executor, lambda: False, timeout_s=0.5)  # the held commands after the trial
+    # The recorder stops last, once the others have: a message or a callback record still in
+    # flight when it stopped would leave a record without its message, or an output without
+    # the record of the callback that published it.
+    for name in ('arm_sim', 'sra_sim', 'load_estimator', 'elastostatic_ik',
+                 'pressure_controller'):
+        assert _stop(node_processes.group.processes[name]) == 0, node_processes.output()
+    spin_until(executor, lambda: False, timeout_s=0.5)
     assert _stop(node_processes.group.processes['bag_recorder']) == 0, node_processes.output()
     executor.remove_node(probe)
     probe.destroy_node()
