@@ -115,7 +115,10 @@ class DetectorParams:
     opening_px : int
         Size of the square structuring element of the opening on the decimated mask (0: none).
     max_candidates : int
-        Number of candidates refined per frame, best first.
+        Number of candidates refined per frame, best first; where none of them is a ball, a
+        whole-frame search also refines the best of those beyond them with a radius of
+        ``2 min_radius_px`` or more (specks of the ball's colour, as on gravel, can outnumber
+        and outscore a ball).
     """
 
     hsv_lower: tuple[int, int, int] = (17, 130, 45)
@@ -206,6 +209,9 @@ _ACCEPT_SEPARATION = 1.6  # smallest separation of the ball from its surround (b
 _MIN_SEPARATION = 2.0  # of the ball-blind channel, below which the best of all is tried
 _INSIDE_TOLERANCE = 0.35  # share of the edge's contrast a ray's inside level may be off
 _SAME_COLOUR = 0.97  # cosine of the angle within which a colour is the ball's
+# share of the disc within 0.7 of an outline that must be of the ball's colour (a ball 30 %
+# hidden: 0.8 and more; a half disc, whose straight cut and arc fit a circle: about 0.55)
+_MIN_OWN_SHARE = 0.65
 _MIN_TOLERANCE_PX = 0.6  # smallest distance of an inlier from the fitted outline [px]
 _MAX_HIDDEN_ARC = 0.36  # share of the outline another thing may hide (the spec: 30 %)
 # the same below _COARSE_MIN_RADIUS_PX: on a few pixels of outline a small cap of a larger
@@ -812,6 +818,21 @@ def _blind_channel(inside: npt.NDArray[np.float32], outside: npt.NDArray[np.floa
     return weights, _separation(inside, outside, weights)
 
 
+def _own_share(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], radius: float,
+               ball_bgr: npt.NDArray[np.float64]) -> float:
+    """Share of the disc within 0.7 ``radius`` of ``center`` that is of the ball's colour (256
+    samples spread evenly over its area; a highlight is not of it)."""
+    rings = 0.7 * radius * np.sqrt((np.arange(8) + 0.5) / 8.0)
+    cos, sin = _ray_directions(32)
+    map_x = (center[0] + np.outer(rings, cos)).astype(np.float32)
+    map_y = (center[1] + np.outer(rings, sin)).astype(np.float32)
+    samples = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3).astype(np.float32)
+    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
+    return float(np.mean(samples @ unit > _SAME_COLOUR * np.sqrt(
+        np.einsum('ij,ij->i', samples, samples))))
+
+
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
                ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
                margin_px: float = 0.0, sigma: float | None = None,
@@ -824,8 +845,8 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     its shading (to place a rough guess); ``'luma'``, JPEG's luma (full resolution where JPEG
     halves the chroma's), with each ray's inside level measured and either polarity (a shaded
     ball is brighter than its surround on one side, darker on another). None if the colour is
-    unknown or too grey, the inside of the outline is not of that colour, or nothing around the
-    ball differs from it clearly."""
+    unknown or too grey, the inside of the outline is not of that colour (`_MIN_OWN_SHARE` of
+    the fitted disc), or nothing around the ball differs from it clearly."""
     if not _coloured(ball_bgr, params):
         return None
     n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
@@ -885,6 +906,8 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
         return None
     (cx, cy), (fw, fh), angle = fit
     a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)
+    if _own_share(image, np.array([cx, cy]), math.sqrt(a * b), ball_bgr) < _MIN_OWN_SHARE:
+        return None
     major = math.radians(angle) if fw >= fh else math.radians(angle) + 0.5 * math.pi
     major = (major + 0.5 * math.pi) % math.pi - 0.5 * math.pi
     return BallDetection(center=np.array([cx, cy]), radius=math.sqrt(a * b),
@@ -998,8 +1021,9 @@ def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], 
                 min_radius_px: float, params: DetectorParams,
                 limit: int | None = None) -> list[tuple[float, npt.NDArray[np.float64], float]]:
     """Where the ball may be in a colour mask of pixel size ``scale`` [image px]:
-    ``(score, centre, radius)`` in mask pixels, best first (the best ``limit`` only, if given:
-    the distance transforms of blobs that cannot reach them are not computed).
+    ``(score, centre, radius)`` in mask pixels, best first. With ``limit``, the best ``limit``
+    and then the best large one beyond them (a radius of ``2 min_radius_px`` or more), if any:
+    the distance transforms of blobs that can be neither are not computed.
 
     Each blob's holes are filled (a highlight punches one). A round blob gives its centroid and
     the radius of its area; any blob also gives the largest disc inside it (the peak of its
@@ -1042,19 +1066,26 @@ def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], 
                     continue  # a disc: its centroid is the better guess
         inscribed.append((vivid, blob, x, y, area))
     min_peak = 0.5 * min_radius_px / scale
+    large = 2.0 * min_radius_px / scale
     inscribed.sort(key=lambda b: -b[0])
     for vivid, blob, x, y, area in inscribed:
         if limit is not None and len(found) >= limit:
             found.sort(key=lambda c: -c[0])
-            if 0.6 * vivid <= found[limit - 1][0]:  # 0.6 vivid: the most a disc scores
-                break  # neither this blob's disc nor a later one's can be among the best
+            most = 0.6 * vivid  # the most this blob's disc, or a later one's, scores
+            # a large one's disc (peak + 0.5 >= large) holds pi (large - 1.5)^2 px at least
+            if most <= found[limit - 1][0] and (
+                    area < math.pi * (large - 1.5) ** 2
+                    or any(c[2] >= large and c[0] >= most for c in found[limit:])):
+                continue  # neither among the best nor the best large one beyond them
         distance = cv2.distanceTransform(blob, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         _, peak, _, (pu, pv) = cv2.minMaxLoc(distance)
         if min_peak <= peak <= params.max_radius_px / scale:
             found.append(((0.5 * min(1.0, math.pi * peak * peak / area) + 0.1) * vivid,
                           np.array([pu + x - 1.0, pv + y - 1.0]), peak + 0.5))
     found.sort(key=lambda c: -c[0])
-    return found if limit is None else found[:limit]
+    if limit is None:
+        return found
+    return found[:limit] + [c for c in found[limit:] if c[2] >= large][:1]
 
 
 def _retry_min_confidence(radius: float) -> float:
@@ -1101,7 +1132,9 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     if params.opening_px > 1 and params.min_radius_px / s >= params.opening_px:
         kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
-    # tracking tries the candidates by distance: all of them
+    # tracking tries the candidates by distance: all of them; a whole-frame search the best,
+    # then the best large one (specks of the ball's colour, as on gravel, can outnumber a ball
+    # whose blob merged with some of them, and outscore it)
     candidates = _candidates(mask, hsv[:, :, 1], s, params.min_radius_px, params,
                              limit=None if near is not None else params.max_candidates)
     # pixel i of the decimated image covers image pixels s i .. s i + s - 1
@@ -1110,6 +1143,7 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     if near is not None:
         target = np.asarray(near, dtype=float)
         guesses.sort(key=lambda g: float(np.hypot(*(g[0] - target))))
+        del guesses[params.max_candidates:]
     colour = None if prior is None else prior.colour_bgr
     # the blob may be smaller than the ball (its shaded limb falls below the colour
     # thresholds): where no candidate is accepted, each is refined again from a larger radius,
@@ -1117,7 +1151,9 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     # most of an outline, or a long arc of it, is believed there (`_retry_min_confidence`)
     for scale, retry in ((1.0, False), (_RETRY_SCALE, True)):
         best = None
-        for centre, radius in guesses[:params.max_candidates]:
+        for i, (centre, radius) in enumerate(guesses):
+            if i == params.max_candidates and best is not None:
+                break  # the large candidate beyond the best is tried where they all fail
             detection = _refine(image, centre, scale * radius, params,
                                 scale * (0.25 * radius + s), colour)
             if not _accept(detection, params) or (

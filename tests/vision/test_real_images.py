@@ -180,3 +180,19 @@ def test_a_whole_outline_just_under_the_smallest_radius_is_a_ball(seed, quality,
     assert detect_ball(case.image).radius < DetectorParams().min_radius_px
     monkeypatch.setattr(tracker, '_RADIUS_TOLERANCE_PX', 0.0)
     assert centre_error(case) >= 1.0
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(36, 75), (196, 75), (246, 75), (296, 75)])
+def test_a_ball_on_gravel_is_refined_beside_the_specks_that_outrank_it(seed, quality,
+                                                                      monkeypatch):
+    # balls of 12-25 px on the gravel photograph, whose hundreds of yellowish specks of 3-5 px
+    # are as round and as vivid as a ball; the ball's blob merged with some of them, so only
+    # its inscribed disc is a candidate, and it ranks 5th or 6th: the best large candidate is
+    # refined beside the best four
+    case = real_case(seed, quality)
+    assert case.conditions.photo == 'gravel' and case.radius > 12.0
+    assert centre_error(case) < 1.0
+    # refining only the best four, as before, misses it
+    candidates = tracker._candidates
+    monkeypatch.setattr(tracker, '_candidates', lambda *args, **kw: candidates(*args, **kw)[:4])
+    assert centre_error(case) >= 1.0
