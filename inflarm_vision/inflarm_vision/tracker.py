@@ -29,8 +29,9 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    through its points without the far ones, an ellipse when 85 % of the outline is on it.
    ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
    it is high enough, the outline not too elongated, its radius in range, and the rays off it
-   one hidden arc at most (`_one_hidden_arc`). The accepted candidate of highest confidence
-   wins (the search stops at one with every ray on its outline). Where none is accepted, each
+   one hidden arc at most (`_one_hidden_arc`). The accepted candidate whose outline is on the
+   most rays wins (a speck's whole outline is fewer rays than most of a ball's; the search
+   stops at one on every ray of the most there are). Where none is accepted, each
    is refined again from 1.3 times its radius (a shaded ball's blob can be half its disc),
    believed on 80 % of the outline.
 4. **Small balls** (under 12 px): where their rays give no accepted outline (a blur of a third
@@ -205,6 +206,7 @@ class BallDetection:
 
 _SATURATED = 250  # a channel at or above this is treated as clipped
 _STEP = 0.5  # sample spacing along the rays [px]
+_MAX_RAYS = 96  # rays round an outline: one per pixel of it, 32 to this many
 _ACCEPT_SEPARATION = 1.6  # smallest separation of the ball from its surround (below: no ball)
 _MIN_SEPARATION = 2.0  # of the ball-blind channel, below which the best of all is tried
 _INSIDE_TOLERANCE = 0.35  # share of the edge's contrast a ray's inside level may be off
@@ -231,7 +233,9 @@ _RETRY_MIN_ARC_PX = 100.0  # ... or this much of it (80 % of a 20 px ball's), if
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # the compiled kernels, cached
 # a small ball's whole blurred disc (`_fit_disc`), where its rays fail
 _DISC_MIN_CONTRAST = 12.0  # smallest step of the ball-blind channel at its edge [grey levels]
-_DISC_MAX_BLUR = 0.4  # largest blur over radius (a blur near the radius rounds any blob)
+# largest blur over radius: a blur near the radius rounds any blob; the spec's defocus (2.5 px)
+# of its smallest ball (4 px) is 0.63, and the fitted radius of so small a ball is larger
+_DISC_MAX_BLUR = 0.6
 _DISC_PROFILE_TOLERANCE = 0.2  # largest RMS misfit of a ray's profile, over the edge's step
 _DISC_EDGE_TOLERANCE_PX = 1.0  # largest distance of a ray's half-level from the model's [px]
 _DISC_MIN_CONFIDENCE = 0.8  # share of the rays that must agree with the fitted disc
@@ -798,9 +802,16 @@ def _own_samples(inside: npt.NDArray[np.float32],
     _, chroma = _channels(ball_bgr)
     if not (inside @ chroma).mean() > 0.5 * float(np.dot(ball_bgr, chroma)):
         return None
-    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
-    own = inside @ unit > _SAME_COLOUR * np.sqrt(np.einsum('ij,ij->i', inside, inside))
+    own = _of_ball_colour(inside, ball_bgr)
     return inside[own] if own.sum() >= 8 else None
+
+
+def _of_ball_colour(samples: npt.NDArray[np.float32],
+                    ball_bgr: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+    """Which BGR samples (n, 3) are of the ball's colour: within `_SAME_COLOUR` of its
+    direction, however bright."""
+    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
+    return samples @ unit > _SAME_COLOUR * np.sqrt(np.einsum('ij,ij->i', samples, samples))
 
 
 def _blind_channel(inside: npt.NDArray[np.float32], outside: npt.NDArray[np.float32],
@@ -828,9 +839,7 @@ def _own_share(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], ra
     map_y = (center[1] + np.outer(rings, sin)).astype(np.float32)
     samples = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
                         borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3).astype(np.float32)
-    unit = (ball_bgr / np.linalg.norm(ball_bgr)).astype(np.float32)
-    return float(np.mean(samples @ unit > _SAME_COLOUR * np.sqrt(
-        np.einsum('ij,ij->i', samples, samples))))
+    return float(np.mean(_of_ball_colour(samples, ball_bgr)))
 
 
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
@@ -849,7 +858,7 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     the fitted disc), or nothing around the ball differs from it clearly."""
     if not _coloured(ball_bgr, params):
         return None
-    n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, 96))
+    n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, _MAX_RAYS))
     cos, sin = _ray_directions(n_rays)
     half_width = 0.15 * r0 + 3.0 + margin_px
     reach = half_width + 8.0  # room for the level windows beyond the search window
@@ -1078,7 +1087,11 @@ def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], 
                     or any(c[2] >= large and c[0] >= most for c in found[limit:])):
                 continue  # neither among the best nor the best large one beyond them
         distance = cv2.distanceTransform(blob, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        _, peak, _, (pu, pv) = cv2.minMaxLoc(distance)
+        # The exact transform gives square roots of integers, their last bit following the
+        # memory layout: on the integers, pixels tied at the peak stay tied, and the first wins.
+        squared = np.rint(distance * distance)
+        pv, pu = np.unravel_index(int(np.argmax(squared)), squared.shape)
+        peak = math.sqrt(float(squared[pv, pu]))
         if min_peak <= peak <= params.max_radius_px / scale:
             found.append(((0.5 * min(1.0, math.pi * peak * peak / area) + 0.1) * vivid,
                           np.array([pu + x - 1.0, pv + y - 1.0]), peak + 0.5))
@@ -1116,8 +1129,9 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
             params: DetectorParams, near: npt.ArrayLike | None = None,
             prior: BallDetection | None = None) -> BallDetection | None:
     """The candidates of ``region`` (decimated as `DetectorParams.decimation` says) refined
-    at full resolution: the accepted one of highest confidence (or, with ``near``, the first
-    accepted in order of distance from it); where none is, the same from a larger radius."""
+    at full resolution: the accepted one whose outline is on the most rays (or, with
+    ``near``, the first accepted in order of distance from it); where none is, the same from
+    a larger radius."""
     h, w = image.shape[:2]
     u0, v0, u1, v1 = (int(x) for x in region)
     u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
@@ -1161,10 +1175,12 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
                 continue
             if near is not None:
                 return detection
-            if best is None or detection.confidence > best.confidence:
+            # the most rays on the outline, not the largest share of them: a gravel speck's
+            # whole outline (32 rays) must not outweigh nearly all of a large ball's (96)
+            if best is None or len(detection.edge_points) > len(best.edge_points):
                 best = detection
-            if best.confidence >= 1.0:
-                break  # every ray on its outline: no later candidate can have more
+            if len(best.edge_points) >= _MAX_RAYS:
+                break  # every ray of the most there are: no later candidate can have more
         if best is not None:
             return best
     return None
@@ -1185,7 +1201,8 @@ def refine_in_region(bgr_image: npt.ArrayLike, region: tuple[int, int, int, int]
     params : DetectorParams
     near : array-like, shape (2,), optional
         Expected centre [px]: candidates are tried in order of distance from it, and the
-        first accepted is returned (default: the accepted one of highest confidence).
+        first accepted is returned (default: the accepted one whose outline is on the most
+        rays).
     prior : BallDetection, optional
         The ball's last detection: its colour is used instead of measuring it (tracking).
 
@@ -1211,7 +1228,8 @@ def detect_ball(bgr_image: npt.ArrayLike,
     Returns
     -------
     BallDetection or None
-        The accepted candidate of highest confidence, or None if there is no yellow ball.
+        The accepted candidate whose outline is on the most rays, or None if there is no
+        yellow ball.
     """
     image = _check_image(bgr_image)
     return _search(image, (0, 0, image.shape[1], image.shape[0]), params)

@@ -169,6 +169,36 @@ def test_the_whole_frame_search_keeps_the_candidates_it_would_rank_without_pruni
     assert compared >= 30 and with_large >= 30  # most frames have more blobs than the limit
 
 
+def test_the_largest_disc_of_a_blob_does_not_follow_the_last_bit_of_its_distances(monkeypatch):
+    # cv2.distanceTransform's last bit follows the memory layout: where pixels tie at a blob's
+    # largest distance, a tie broken by one ulp must not move the candidate (it once made a
+    # clutter frame found in some processes and not in others)
+    from inflarm_vision import tracker
+
+    params = DetectorParams()
+    mask = np.zeros((60, 90), np.uint8)
+    mask[20:41, 15:76] = 255  # a bar: its middle row ties at the largest distance
+    saturation = np.full(mask.shape, 200, np.uint8)
+    exact = tracker._candidates(mask, saturation, 1.0, params.min_radius_px, params)
+    transform = cv2.distanceTransform
+
+    def nudged(which):
+        def distance_transform(*args):
+            distance = transform(*args)
+            tied = np.flatnonzero(distance == distance.max())
+            assert tied.size > 10
+            flat = distance.reshape(-1)
+            flat[tied[which]] = np.nextafter(flat[tied[which]], np.float32(np.inf))
+            return distance
+        return distance_transform
+
+    for which in (0, -1, 7):
+        monkeypatch.setattr(tracker.cv2, 'distanceTransform', nudged(which))
+        moved = tracker._candidates(mask, saturation, 1.0, params.min_radius_px, params)
+        assert [(s, tuple(c), r) for s, c, r in moved] == [(s, tuple(c), r) for s, c, r in exact]
+    assert len(exact) == 1 and exact[0][2] == 11.5  # the peak, 11 px from the edge, + 0.5
+
+
 def test_edges_finds_the_outline_of_a_blurred_disc_and_its_blur():
     # the compiled edge kernel on the exact radial profile of a disc of radius R blurred by a
     # Gaussian of sigma: the share of the blur kernel outside the disc is a Rice survival
