@@ -206,7 +206,9 @@ class BallDetection:
 
 _SATURATED = 250  # a channel at or above this is treated as clipped
 _STEP = 0.5  # sample spacing along the rays [px]
-_MAX_RAYS = 96  # rays round an outline: one per pixel of it, 32 to this many
+# rays round an outline: one per pixel of it, within these (the whole-frame search compares
+# outlines by their rays: a small ball's disc fit has as many as its ray pass)
+_MIN_RAYS, _MAX_RAYS = 32, 96
 _ACCEPT_SEPARATION = 1.6  # smallest separation of the ball from its surround (below: no ball)
 _MIN_SEPARATION = 2.0  # of the ball-blind channel, below which the best of all is tried
 _INSIDE_TOLERANCE = 0.35  # share of the edge's contrast a ray's inside level may be off
@@ -751,7 +753,7 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
     if b0 < _DISC_MIN_CONTRAST or s > _DISC_MAX_BLUR * rho:
         return None
     # the rays from the fitted centre, across the fitted edge
-    n_rays = 32
+    n_rays = _MIN_RAYS
     cos, sin = _ray_directions(n_rays)
     t = np.arange(max(rho - 2.0 * s - 1.0, 0.0), rho + 2.0 * s + 1.0 + 1e-9, _STEP)
     ray_dx = (cx + np.outer(cos, t)).ravel()
@@ -858,7 +860,7 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     the fitted disc), or nothing around the ball differs from it clearly."""
     if not _coloured(ball_bgr, params):
         return None
-    n_rays = int(np.clip(round(2.0 * math.pi * r0), 32, _MAX_RAYS))
+    n_rays = int(np.clip(round(2.0 * math.pi * r0), _MIN_RAYS, _MAX_RAYS))
     cos, sin = _ray_directions(n_rays)
     half_width = 0.15 * r0 + 3.0 + margin_px
     reach = half_width + 8.0  # room for the level windows beyond the search window
