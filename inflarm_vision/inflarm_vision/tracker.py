@@ -28,12 +28,13 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
 3. **Fit** (`_fit_outline`): a consensus circle through triples of edge points, least squares
    through its points without the far ones, an ellipse when 85 % of the outline is on it.
    ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
-   it is high enough, the outline not too elongated, its radius in range, and the rays off it
-   one hidden arc at most (`_one_hidden_arc`). The accepted candidate whose outline is on the
-   most rays wins (a speck's whole outline is fewer rays than most of a ball's; the search
-   stops at one on every ray of the most there are). Where none is accepted, each
-   is refined again from 1.3 times its radius (a shaded ball's blob can be half its disc),
-   believed on 80 % of the outline.
+   it is high enough, the outline not too elongated, its radius in range, the rays off it
+   one hidden arc at most, or two where 70 % of the outline is found (`_one_hidden_arc`), and
+   the ball's colour saturated (`DetectorParams.min_saturation`). The accepted candidate whose
+   outline is on the most rays wins (a speck's whole outline is fewer rays than most of a
+   ball's; the search stops at one on every ray of the most there are). Where none is
+   accepted, each is refined again from 1.3 times its radius (a shaded ball's blob can be half
+   its disc), believed on 80 % of the outline.
 4. **Small balls** (under 12 px): where their rays give no accepted outline (a blur of a third
    of the radius leaves too few samples for an edge's levels), the whole blurred disc is
    fitted to the ball-blind channel around the candidate (`_fit_disc`: a blurred ellipse on a
@@ -113,6 +114,11 @@ class DetectorParams:
     min_chroma : float
         Smallest distance of the ball's colour from grey [grey levels] (rejects dark, nearly
         grey blobs whose hue is noise).
+    min_saturation : float
+        Smallest saturation (1 - min / max of B, G, R) of the ball's colour as measured on its
+        disc: a yellow ball's is high however it is shaded, dull orange wood and fur under
+        JPEG are paler. The pixels' threshold (``hsv_lower``'s S, 130 = 0.51) is lower, so that
+        JPEG's blurred chroma at the ball's edge stays in the mask.
     opening_px : int
         Size of the square structuring element of the opening on the decimated mask (0: none).
     max_candidates : int
@@ -131,6 +137,7 @@ class DetectorParams:
     max_aspect_ratio: float = 1.3
     min_confidence: float = 0.6
     min_chroma: float = 20.0
+    min_saturation: float = 0.63
     opening_px: int = 3
     max_candidates: int = 4
 
@@ -147,7 +154,7 @@ class DetectorParams:
             raise ValueError(
                 f'expected max_radius_px > min_radius_px = {self.min_radius_px} [px], got '
                 f'{self.max_radius_px}')
-        for name in ('min_circularity', 'min_fill', 'min_confidence'):
+        for name in ('min_circularity', 'min_fill', 'min_confidence', 'min_saturation'):
             value = getattr(self, name)
             if not (0.0 <= value <= 1.0):
                 raise ValueError(f'expected {name} in [0, 1], got {value}')
@@ -221,6 +228,7 @@ _MAX_HIDDEN_ARC = 0.36  # share of the outline another thing may hide (the spec:
 # the same below _COARSE_MIN_RADIUS_PX: on a few pixels of outline a small cap of a larger
 # yellow shape (a corner, the end of a half disc) passes for a ball hidden by 30 %
 _MAX_HIDDEN_ARC_SMALL = 0.28
+_TWO_RUNS_MIN_SHARE = 0.7  # smallest share of the rays on an outline hidden in two arcs
 _COARSE_MIN_RADIUS_PX = 8.0  # smaller guesses: too few samples for the levels of the coarse pass
 _RIDGE = 4.0  # grey levels^2 added to the colour scatter of Fisher's discriminant
 _LUMA = np.array([0.114, 0.587, 0.299], np.float32)  # ITU-R BT.601 (JPEG's), BGR order
@@ -790,9 +798,10 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
 
 
 def _coloured(ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams) -> bool:
-    """Whether a measured ball colour is one (known, and far enough from grey)."""
+    """Whether a measured ball colour is one (known, far enough from grey, saturated enough)."""
     return ball_bgr is not None and bool(
-        np.linalg.norm(ball_bgr - ball_bgr.mean()) >= max(params.min_chroma, 1.0))
+        np.linalg.norm(ball_bgr - ball_bgr.mean()) >= max(params.min_chroma, 1.0)
+        and ball_bgr.min() <= (1.0 - params.min_saturation) * ball_bgr.max())
 
 
 def _own_samples(inside: npt.NDArray[np.float32],
@@ -928,9 +937,11 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
 
 def _one_hidden_arc(inliers: npt.NDArray[np.bool_], max_hidden: float) -> bool:
     """Whether the rays off the outline (round the ball, in order) are what a ball partly
-    hidden by one thing leaves: at most one long run of them (over a tenth of the rays), of at
-    most ``max_hidden`` of the rays; short runs are texture and highlights. A bar of the
-    ball's colour (two long runs), or a half disc (one of half the rays), is no ball."""
+    hidden by one thing leaves: long runs of them (over a tenth of the rays) of at most
+    ``max_hidden`` of the rays in all, one of them, or two where `_TWO_RUNS_MIN_SHARE` of the
+    rays are on the outline (the texture beside the hiding thing can take a second arc);
+    short runs are texture and highlights. A bar of the ball's colour (two long runs, less of
+    the outline found), or a half disc (one run of half the rays), is no ball."""
     n = len(inliers)
     if inliers.all():
         return True
@@ -939,7 +950,8 @@ def _one_hidden_arc(inliers: npt.NDArray[np.bool_], max_hidden: float) -> bool:
     edges = np.diff(np.concatenate([[0], off.astype(np.int8), [0]]))
     runs = np.nonzero(edges == -1)[0] - np.nonzero(edges == 1)[0]
     long_runs = runs[runs > max(2, 0.1 * n)]
-    return len(long_runs) <= 1 and (len(long_runs) == 0 or long_runs[0] <= max_hidden * n)
+    return long_runs.sum() <= max_hidden * n and (
+        len(long_runs) <= 1 or (len(long_runs) == 2 and inliers.mean() >= _TWO_RUNS_MIN_SHARE))
 
 
 def _accept(detection: BallDetection | None, params: DetectorParams) -> bool:

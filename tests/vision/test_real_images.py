@@ -56,6 +56,17 @@ def test_no_ball_is_found_in_the_ball_free_photographs(quality):
     assert found == []
 
 
+def test_a_dull_orange_patch_under_jpeg_is_no_ball():
+    # ball-free frame 42 at JPEG 50, the cat's fur: a round patch of 8 px whose pixels pass
+    # the colour thresholds, of a colour of saturation 0.60 on average (a yellow ball's: 0.66
+    # and more in the test set), was found on 64 % of its outline
+    image = ball_free_frame(42, 50)
+    assert detect_ball(image) is None
+    found = detect_ball(image, DetectorParams(min_saturation=0.0))
+    assert found is not None
+    assert 0.55 < 1.0 - found.colour_bgr.min() / found.colour_bgr.max() < 0.63
+
+
 def test_a_ball_just_inside_the_image_border_is_found():
     # 2-4 px between its outline and the border: the windows beyond its edge are cut there
     found, cases = 0, 0
@@ -80,6 +91,32 @@ def test_a_ball_a_quarter_hidden_by_a_bar_is_found():
         found += centre_error(case) < 1.0
     # 83 % before the coarse channel became the fine pass's last resort
     assert found >= 0.85 * 60, found
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(185, None), (293, 75)])
+def test_a_ball_hidden_by_a_bar_and_an_arc_of_texture_is_found(seed, quality, monkeypatch):
+    # held-out scenes: balls of 28 px on grass and 85 px on coffee beans, 14 % and 28 % of the
+    # outline hidden by a bar; the texture beside the bar takes a second arc off the outline,
+    # which was refused as a bar of the ball's colour (two long runs of rays off it)
+    case = real_case(seed, quality)
+    assert case.conditions.occlusion > 0.1
+    assert centre_error(case) < 0.5
+    monkeypatch.setattr(tracker, '_TWO_RUNS_MIN_SHARE', math.inf)  # one hidden arc only
+    assert centre_error(case) >= 1.0
+
+
+def test_two_hidden_arcs_pass_for_a_ball_only_where_most_of_the_outline_is_found():
+    on_outline = np.ones(100, bool)
+    on_outline[5:23] = False  # 18 rays hidden by a bar
+    on_outline[50:61] = False  # 11 by texture: 71 % on the outline
+    assert tracker._one_hidden_arc(on_outline, 0.36)
+    on_outline[61:64] = False  # 14 by texture: 68 %, as a bar of the ball's colour leaves
+    assert not tracker._one_hidden_arc(on_outline, 0.36)
+    on_outline[50:64] = True
+    on_outline[5:37] = False  # one arc of 32 rays hidden
+    assert tracker._one_hidden_arc(on_outline, 0.36)
+    on_outline[37] = False  # 33 rays, 0.33 of them: more than 0.3 may not be hidden
+    assert not tracker._one_hidden_arc(on_outline, 0.3)
 
 
 @pytest.mark.parametrize(('seed', 'quality'), [(117, 75), (67, 95)])
@@ -214,11 +251,12 @@ def test_a_small_ball_blurred_by_half_its_radius_is_found_from_its_whole_disc(se
 def test_a_large_ball_outweighs_a_speck_whose_whole_outline_is_found():
     # scene 116 at JPEG 75 (of the set): a 96 px ball on gravel, found on 95 of its 96 rays,
     # and a sand speck found on all 32 of its own; the larger share of rays picked the speck
+    # (a speck too pale for min_saturation now: without that floor it is accepted)
     case = real_case(116, 75)
-    detection = detect_ball(case.image)
+    params = DetectorParams(min_saturation=0.0)
+    detection = detect_ball(case.image, params)
     assert np.hypot(*(detection.center - case.center)) < 0.5
     assert detection.radius == pytest.approx(case.radius, abs=1.0)
-    params = DetectorParams()
     speck = tracker._refine(case.image, np.array([202.6, 9.3]), 2.6, params,
                             0.25 * 2.6 + params.decimation)
     assert tracker._accept(speck, params) and speck.radius < 5.0

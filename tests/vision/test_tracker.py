@@ -139,6 +139,8 @@ def test_region_search_and_validation():
         DetectorParams(min_radius_px=1.0)
     with pytest.raises(ValueError, match='min_confidence'):
         DetectorParams(min_confidence=1.5)
+    with pytest.raises(ValueError, match='min_saturation'):
+        DetectorParams(min_saturation=-0.1)
     with pytest.raises(ValueError, match='search_radii'):
         BallTracker(search_radii=0.5)
 
