@@ -1073,33 +1073,8 @@ def solve_load_fixed_point(
     Iterates f = U_m^-T tau_m (eq. 6), q_k = U_k^T f / k (eq. 7) from q_k0 until the residual
     of eq. (7) is below ``tol``. It contracts only while the load's geometric stiffness stays
     small against k (the package README gives measured failure rates); ``solve_load_newton``
-    does not need that.
-    Parameters
-    ----------
-    arm : FlexibleArm
-        The 7-DOF arm of Table 2.
-    q_m : array-like, shape (..., 3)
-        Motor angles [rad], DH joints 1, 2, 5.
-    tau_m : array-like, shape (..., 3)
-        Motor torques [N·m] (eq. 6 convention), broadcast against ``q_m``.
-    stiffness : float or array-like, shape (4,)
-        Spring stiffness [N·m/rad], shared or per spring (see ``check_stiffness``).
-    q_k0 : array-like, shape (..., 4), optional
-        Start [rad]; zeros (the rigid arm) by default.
-    tol : float, optional
-        Residual tolerance [N·m], positive.
-    max_iterations : int, optional
-        Iterations allowed, >= 1.
-
-    Returns
-    -------
-    ElastostaticSolution
-
-    Raises
-    ------
-    ValueError
-        On arguments of the wrong shape, non-finite values, non-positive stiffness or
-        tolerances.
+    does not need that. Parameters, result and errors as ``solve_load_newton``'s
+    (``max_iterations``: iterations of the fixed point).
     """
     return _run(arm, q_m, tau_m, 'tau_m', 'N·m', stiffness, q_k0, tol, max_iterations,
                 inverse=True, mode=_FIXED_POINT)
@@ -1120,6 +1095,7 @@ def solve_load_newton(
     With f(q_k) = U_m^-T tau_m (eq. 6 of 000_ce37cf035a0a87c6) eliminated, solves
     g(q_k) = K q_k - U_k^T f(q_k) = 0 (eq. 7) with the derivative D of
     ``reduced_newton_matrix`` and a backtracking line search on |g|^2, from q_k0.
+
     Parameters
     ----------
     arm : FlexibleArm
@@ -1167,33 +1143,16 @@ def solve_load_continuation(
     lambda tau_m for lambda = 1/steps, 2/steps, ..., 1, each solved from the previous
     solution, an increment that fails halved (down to 1/(8 steps)). It finds the branch of the
     unloaded arm where a direct Newton solve from q_k = 0 fails.
+
+    Parameters, result and errors as ``solve_load_newton``'s, with no ``q_k0`` and:
+
     Parameters
     ----------
-    arm : FlexibleArm
-        The 7-DOF arm of Table 2.
-    q_m : array-like, shape (..., 3)
-        Motor angles [rad], DH joints 1, 2, 5.
-    tau_m : array-like, shape (..., 3)
-        Motor torques [N·m] (eq. 6 convention), broadcast against ``q_m``.
-    stiffness : float or array-like, shape (4,)
-        Spring stiffness [N·m/rad], shared or per spring (see ``check_stiffness``).
     steps : int, optional
-        Increments of lambda, >= 1.
-    tol : float, optional
-        Residual tolerance [N·m], positive.
+        Increments of lambda, >= 1 (``ValueError`` otherwise).
     max_iterations : int, optional
-        Newton iterations allowed per increment, >= 1.
-
-    Returns
-    -------
-    ElastostaticSolution
-        ``iterations`` summed over the increments.
-
-    Raises
-    ------
-    ValueError
-        On arguments of the wrong shape, non-finite values, non-positive stiffness or
-        tolerances, or ``steps`` < 1.
+        Newton iterations allowed per increment, >= 1; ``iterations`` in the result is
+        their sum over the increments.
     """
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
         raise ValueError(f'expected steps an integer >= 1, got {steps!r}')

@@ -334,50 +334,18 @@ class DHChain:
         return self._pass(q)[0]
 
     def jacobian(self, q: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """Geometric Jacobian of eq. (4) at the tip, in the base frame.
-
-        Parameters
-        ----------
-        q : array-like, shape (n,)
-            Joint angles [rad] in DH order.
-
-        Returns
-        -------
-        ndarray, shape (6, n)
-            Linear rows [m/rad] first, then angular rows [rad/rad], base-frame axes; column i
-            is ``[z_{i-1} x (p_e - p_{i-1}); z_{i-1}]``.
-
-        Raises
-        ------
-        ValueError
-            If ``q`` has the wrong shape or is not finite.
-        """
+        """Geometric Jacobian of eq. (4) at the tip, in the base frame, at the joint angles
+        ``q`` of ``fk``: shape (6, n), linear rows [m/rad] first, then angular rows [rad/rad],
+        base-frame axes; column i is ``[z_{i-1} x (p_e - p_{i-1}); z_{i-1}]``. ``ValueError``
+        as ``fk``."""
         return self._pass(q)[1]
 
     def fk_and_jacobian(
         self, q: npt.ArrayLike
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Tip pose and geometric Jacobian from a single kinematic pass.
-
-        The hot path of the load/pose estimator and the elastostatic IK (sections 2.3-2.4).
-
-        Parameters
-        ----------
-        q : array-like, shape (n,)
-            Joint angles [rad] in DH order.
-
-        Returns
-        -------
-        pose : ndarray, shape (4, 4)
-            Tip pose T_0^n in the base frame [m].
-        jacobian : ndarray, shape (6, n)
-            Geometric Jacobian of eq. (4), linear rows first, base-frame axes.
-
-        Raises
-        ------
-        ValueError
-            If ``q`` has the wrong shape or is not finite.
-        """
+        """``(fk(q), jacobian(q))`` from a single kinematic pass: the hot path of the
+        load/pose estimator and the elastostatic IK (sections 2.3-2.4). ``ValueError`` as
+        ``fk``."""
         pose, jacobian, _ = self._pass(q)
         return pose, jacobian
 
@@ -392,67 +360,21 @@ class DHChain:
         return poses, jacobians
 
     def fk_batch(self, Q: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """Tip poses of many configurations, vectorized.
-
-        Parameters
-        ----------
-        Q : array-like, shape (N, n)
-            One configuration of joint angles [rad] per row, DH order.
-
-        Returns
-        -------
-        ndarray, shape (N, 4, 4)
-            Tip poses in the base frame [m].
-
-        Raises
-        ------
-        ValueError
-            If ``Q`` has the wrong shape or is not finite.
-        """
+        """``fk`` of every row of ``Q`` (N, n) [rad], in one compiled pass: shape (N, 4, 4).
+        ``ValueError`` if ``Q`` has the wrong shape or is not finite."""
         return self._batch_pass(Q)[0]
 
     def jacobian_batch(self, Q: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """Geometric Jacobians (eq. 4) of many configurations, vectorized.
-
-        Parameters
-        ----------
-        Q : array-like, shape (N, n)
-            One configuration of joint angles [rad] per row, DH order.
-
-        Returns
-        -------
-        ndarray, shape (N, 6, n)
-            Jacobians, linear rows first, base-frame axes.
-
-        Raises
-        ------
-        ValueError
-            If ``Q`` has the wrong shape or is not finite.
-        """
+        """``jacobian`` of every row of ``Q`` (N, n) [rad], in one compiled pass: shape
+        (N, 6, n). ``ValueError`` if ``Q`` has the wrong shape or is not finite."""
         return self._batch_pass(Q)[1]
 
     def fk_and_jacobian_batch(
         self, Q: npt.ArrayLike
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Tip poses and Jacobians of many configurations from one vectorized pass.
-
-        Parameters
-        ----------
-        Q : array-like, shape (N, n)
-            One configuration of joint angles [rad] per row, DH order.
-
-        Returns
-        -------
-        poses : ndarray, shape (N, 4, 4)
-            Tip poses in the base frame [m].
-        jacobians : ndarray, shape (N, 6, n)
-            Geometric Jacobians of eq. (4), linear rows first, base-frame axes.
-
-        Raises
-        ------
-        ValueError
-            If ``Q`` has the wrong shape or is not finite.
-        """
+        """``fk_and_jacobian`` of every row of ``Q`` (N, n) [rad], in one compiled pass:
+        poses (N, 4, 4) and Jacobians (N, 6, n). ``ValueError`` if ``Q`` has the wrong shape or
+        is not finite."""
         return self._batch_pass(Q)
 
     def joint_origins(self, q: npt.ArrayLike) -> npt.NDArray[np.float64]:

@@ -124,14 +124,6 @@ def jpeg_size(data: bytes) -> tuple[int, int]:
     raise ValueError('JPEG without a frame header (SOF)')
 
 
-def _is_jpeg(data: bytes) -> bool:
-    try:
-        jpeg_size(data)
-    except ValueError:
-        return False
-    return True
-
-
 @dataclass(frozen=True)
 class CaptureSettings:
     """What to open and how.
