@@ -723,10 +723,10 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
     from the fitted centre agrees with the fit where its profile is within
     `_DISC_PROFILE_TOLERANCE` of the edge's step of the model's and its half level within
     `_DISC_EDGE_TOLERANCE_PX` of the model's (a corner of another shape is off both); the
-    fit is believed where `_DISC_MIN_CONFIDENCE` of them agree, the rays off it are one hidden
-    arc, the step is at least `_DISC_MIN_CONTRAST` and the blur at most `_DISC_MAX_BLUR` of the
-    radius. None otherwise, or if the colour or the separation of the ball from its surround
-    fails as in `_refine_at`."""
+    fit is believed where `_DISC_MIN_CONFIDENCE` of them agree, the rays off it are as a
+    hiding thing leaves them (`_one_hidden_arc`), the step is at least `_DISC_MIN_CONTRAST`
+    and the blur at most `_DISC_MAX_BLUR` of the radius. None otherwise, or if the colour or
+    the separation of the ball from its surround fails as in `_refine_at`."""
     if not _coloured(ball_bgr, params):
         return None
     h, w = image.shape[:2]
