@@ -4,15 +4,17 @@ The pure half of the bag regression (``inflarm_bringup.bag_regression``): no rcl
 are `inflarm_hw.bag.BagMessage` tuples, decoded on both sides by the ``rosbags`` typestore.
 
 Matching. Messages with a header stamp on both sides are matched by stamp, the others by time
-(record time in the bag, publish time in the replay), among those of the same label (the kind
-and the text fields: a link's name, joint names, frames), so that a status the recorder lost
-does not shift the next link's onto it. Both sides are sorted by that key (stably) and merged:
-two messages match when their keys differ by at most half the median spacing of the replay's
-distinct keys (else of the recorded keys; any amount with fewer than two), so that a stream at
-a fixed rate never pairs a message with its neighbour. Replayed messages more than that outside
-the compared recorded span (``outside``) are not counted: a recorder sees a topic only while it
-is subscribed, the replay runs over the whole bag. Recorded messages before a topic's start
-(``starts``) are not compared; the replayed ones before it are outside.
+(each side's ``timestamp_ns``: the bag regression gives both the time of the callback that
+published them, `inflarm_bringup.ros.lockstep.published_at`), among those of the same label
+(the kind and the text fields: a link's name, joint names, frames), so that a status the
+recorder lost does not shift the next link's onto it. Both sides are sorted by that key
+(stably) and merged: two messages match when their keys differ by at most half the median
+spacing of the replay's distinct keys (else of the recorded keys; any amount with fewer than
+two), so that a stream at a fixed rate never pairs a message with its neighbour. Replayed
+messages more than that outside the compared recorded span (``outside``) are not counted: a
+recorder sees a topic only while it is subscribed, the replay runs over the whole bag.
+Recorded messages before a topic's start (``starts``) are not compared; the replayed ones
+before it are outside.
 
 Fields. A message's leaves (`flatten`) are grouped by field; a group has a quantity
 (`QUANTITIES`) or must be equal. A leaf on one side only, a ``null`` against a number or

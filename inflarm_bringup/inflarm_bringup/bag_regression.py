@@ -21,7 +21,8 @@ in neither is skipped and counted: the recorder had not yet subscribed, or lost 
 replayed: service calls, and when a background job finished (in simulated time computing takes
 none). The first ``--skip-start-s`` after each node's first recorded output are not compared:
 what a node took before the recorder subscribed is not in the bag. Comparison:
-`inflarm_bringup.bag_compare`.
+`inflarm_bringup.bag_compare`, each recorded output timed at the callback whose record lists it
+(`inflarm_bringup.ros.lockstep.published_at`), as its replayed twin is.
 """
 
 import argparse
@@ -168,7 +169,8 @@ def regression(bag: str | os.PathLike, result: Replay,
                skip_start_s: float = SKIP_START_S) -> Report:
     """Compare the replay ``result`` with the outputs recorded in ``bag``: every compared
     output topic of the nodes under test that the bag holds, each from ``skip_start_s`` [s]
-    after its node's first recorded output.
+    after its node's first recorded output; each recorded output timed at the callback that
+    published it (`published_at`).
 
     Raises
     ------
@@ -179,9 +181,12 @@ def regression(bag: str | os.PathLike, result: Replay,
             and skip_start_s >= 0):
         raise ValueError(f'skip_start_s: expected a finite number >= 0 [s], got '
                          f'{skip_start_s!r}')
+    from inflarm_bringup.ros.lockstep import published_at
+
     in_bag = bag_info(bag).topics
     topics = [t for t in result.compared_topics if t in in_bag]
-    recorded = list(read_messages(bag, topics))
+    records = [r for node in callback_records(bag).values() for r in node]
+    recorded = published_at(records, read_messages(bag, topics))
     starts = {}
     for io in result.nodes:
         first = min((m.timestamp_ns for m in recorded if m.topic in io.compared_outputs),

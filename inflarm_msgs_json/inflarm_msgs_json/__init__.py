@@ -24,6 +24,7 @@ from inflarm_msgs_json.messages import (
     PlanOutcome,
     PlanRequest,
     PressureCommand,
+    PublishedMessage,
     TrialReport,
 )
 from inflarm_msgs_json.spec import MESSAGE_TYPES, Message, MessageError, json_schema
@@ -45,6 +46,7 @@ __all__ = [
     'PlanOutcome',
     'PlanRequest',
     'PressureCommand',
+    'PublishedMessage',
     'TrialReport',
     'decode',
     'encode',

@@ -243,6 +243,20 @@ CALLBACK_LOG_TOPIC = '/callback_log'
 
 
 @dataclass(frozen=True)
+class PublishedMessage(Record):
+    """A message a callback published, named as `CallbackRecord` names the one it took; not a
+    message by itself."""
+
+    topic: str = field_spec(NAME, "the resolved topic, e.g. '/link_status'")
+    stamp_ns: int | None = field_spec(
+        Nullable(COUNT), 'its header stamp [ns]; null without one'
+    )
+    digest: int | None = field_spec(
+        Nullable(COUNT), 'CRC-32 of the text of a std_msgs/String; null otherwise'
+    )
+
+
+@dataclass(frozen=True)
 class CallbackRecord(Message):
     """One callback a node ran: what ``inflarm-bag-regression`` replays, in this order."""
 
@@ -256,6 +270,10 @@ class CallbackRecord(Message):
     )
     digest: int | None = field_spec(
         Nullable(COUNT), 'CRC-32 of the text of a std_msgs/String taken; null otherwise'
+    )
+    published: tuple[PublishedMessage, ...] = field_spec(
+        Array(Nested(PublishedMessage)),
+        'the messages it published with a stamp or a text, in order', default=()
     )
 
 

@@ -6,6 +6,7 @@ a changed parameter naming the topic, and rejects a bag without callback records
 import dataclasses
 import pathlib
 import signal
+import zlib
 
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from nav_msgs.msg import Path
@@ -18,9 +19,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 import yaml
 
-from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, compare
+from inflarm_bringup.bag_compare import DEFAULT_TOLERANCES, compare, stamp_ns
 from inflarm_bringup.bag_regression import main, regression, replay
-from inflarm_hw.bag import BagWriter, bag_info, read_messages, serialize, typestore
+from inflarm_hw.bag import BagWriter, bag_info, deserialize, read_messages, serialize, typestore
 from inflarm_msgs_json import ControlTask, TrialReport, decode, encode
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.qos import COMMAND_QOS, RELIABLE_QOS, SENSOR_QOS
@@ -81,15 +82,23 @@ def record_run(node_processes, executor, bag: pathlib.Path, params_file: pathlib
                          str(params_file), parameters=UNDER_TEST)
     node_processes.start('inflarm_hw', 'bag_recorder', parameters={
         'topics': INPUTS + OUTPUTS + [RECORDS], 'output': str(bag)})
+    # Every publisher matched by the recorder: each is matched on its own, a second or more
+    # after its topic was found when the machine is busy, and the records and messages of one
+    # matched after the path was sent are lost from the bag (the replayed IK then has no load
+    # when the path comes and rejects it).
     for topic in INPUTS + OUTPUTS + [RECORDS]:
-        assert node_processes.wait_for_output(f'recording /{topic}', 30.0), \
-            node_processes.output()
+        count = '3 publishers' if topic == RECORDS else '1 publisher'  # the nodes under test
+        assert node_processes.wait_for_output(
+            f'[bag_recorder]: /{topic}: recording from {count}', 30.0), node_processes.output()
     # The IK and the controller hear the probe (and so does the recorder).
     assert spin_until(executor, lambda: path_pub.get_subscription_count() == 2
                       and task_pub.get_subscription_count() == 2, timeout_s=15.0)
-    # A second of estimates past their start-up backlog: the IK has a load by then.
-    assert spin_until(executor, lambda: tips and len(wrenches) >= 50, timeout_s=20.0), \
-        node_processes.output()
+    # A second of estimates from here, all in the bag (the IK's load before the path; the
+    # regression's start-up): when the recorder matched late, the probe has had its own for
+    # long.
+    received = len(wrenches)
+    assert spin_until(executor, lambda: tips and len(wrenches) >= received + 50,
+                      timeout_s=20.0), node_processes.output()
 
     # A 2 s path from where the tip is, due 0.5 s after it is sent (as tip_path_demo does).
     start = np.array([tips[-1].point.x, tips[-1].point.y, tips[-1].point.z])
@@ -197,14 +206,17 @@ def test_a_record_whose_message_the_recorder_lost_is_skipped_and_counted(recorde
                                                                         capsys):
     bag, params_file = recorded
     info = bag_info(bag)
-    samples = [m.timestamp_ns for m in read_messages(bag, ['/joint_states'])]
-    lost = {samples[len(samples) // 2], samples[len(samples) // 2 + 1]}
+    # two samples whose estimates the bag holds (an estimate has its sample's stamp)
+    estimated = [stamp_ns(deserialize(m.data, m.msgtype))
+                 for m in read_messages(bag, ['/estimated_wrench'])]
+    lost = set(estimated[len(estimated) // 2:len(estimated) // 2 + 2])
     lossy = tmp_path / 'lossy'
     with BagWriter(lossy) as writer:
         for topic, topic_info in sorted(info.topics.items()):
             writer.add_topic(topic, topic_info.msgtype, topic_info.offered_qos)
         for m in read_messages(bag, sorted(info.topics)):
-            if not (m.topic == '/joint_states' and m.timestamp_ns in lost):
+            if not (m.topic == '/joint_states'
+                    and stamp_ns(deserialize(m.data, m.msgtype)) in lost):
                 writer.write(m.topic, m.timestamp_ns, m.data)
     skipped = len(replay(bag, ['load_estimator'], [params_file]).skipped)
     result = replay(lossy, ['load_estimator'], [params_file])
@@ -219,6 +231,74 @@ def test_a_record_whose_message_the_recorder_lost_is_skipped_and_counted(recorde
     main([str(lossy), '--nodes', 'load_estimator', '--params-file', str(params_file)])
     assert f'load_estimator {result.callbacks["load_estimator"]} ({skipped + 2} skipped: ' \
         'message not recorded)' in capsys.readouterr().out
+
+
+def test_outputs_the_recorder_took_late_are_compared_with_those_of_their_own_callback(
+        recorded, tmp_path):
+    # On a busy machine the recorder takes a message tens of ms after it was published: more
+    # than half the spacing of link_status (10 Hz per link), so that by receive time a status
+    # would be paired with the next callback's. Each is timed at the callback that published
+    # it, which its record lists.
+    bag, params_file = recorded
+    late = tmp_path / 'late'
+    info = bag_info(bag)
+    with BagWriter(late) as writer:
+        for topic, topic_info in sorted(info.topics.items()):
+            writer.add_topic(topic, topic_info.msgtype, topic_info.offered_qos)
+        for m in read_messages(bag, sorted(info.topics)):
+            delay = 70_000_000 if m.topic in ('/link_status', '/chamber_pressure_command') else 0
+            writer.write(m.topic, m.timestamp_ns + delay, m.data)
+    report = regression(late, replay(late, ['load_estimator', 'pressure_controller'],
+                                     [params_file]))
+    for name in ('/link_status', '/chamber_pressure_command'):
+        topic = next(t for t in report.topics if t.topic == name)
+        assert topic.key == 'time' and topic.matched == topic.recorded > 20, topic
+        assert all(f.max_abs_diff <= 1e-9 for f in topic.fields), topic
+
+
+def test_a_callback_record_names_the_messages_its_callback_published(executor):
+    from rclpy.node import Node
+
+    from inflarm_msgs_json.ros.node import CALLBACK_LOG_QOS, GuardedCallbacks
+
+    class Echo(GuardedCallbacks, Node):
+        def __init__(self, **kwargs) -> None:
+            super().__init__('echo', **kwargs)
+            self.text_pub = self.create_publisher(String, 'echo_text', RELIABLE_QOS)
+            self.point_pub = self.create_publisher(PointStamped, 'echo_point', RELIABLE_QOS)
+            self.create_guarded_subscription(String, 'text', self.on_text, RELIABLE_QOS)
+
+        def on_text(self, msg: String) -> None:
+            point = PointStamped()
+            point.header.stamp.sec = 12
+            self.point_pub.publish(point)
+            self.text_pub.publish(String(data=msg.data.upper()))
+            self.text_pub.publish(b'raw bytes: no stamp, no text')
+
+    echo = Echo(context=executor.context, parameter_overrides=[
+        rclpy.parameter.Parameter('callback_log', value=True)])
+    probe = rclpy.create_node('probe', context=executor.context)
+    records: list = []
+    probe.create_subscription(String, '/callback_log', lambda m: records.append(decode(m.data)),
+                              CALLBACK_LOG_QOS)
+    text_pub = probe.create_publisher(String, 'text', RELIABLE_QOS)
+    for node in (echo, probe):
+        executor.add_node(node)
+    [log_pub] = [p for p in echo.publishers if p.topic_name == '/callback_log']
+    assert spin_until(executor, lambda: text_pub.get_subscription_count() == 1
+                      and log_pub.get_subscription_count() == 1)
+    text_pub.publish(String(data='hello'))
+    assert spin_until(executor, lambda: records)
+    [record] = records
+    assert record.callback == '/text' and record.digest == zlib.crc32(b'hello')
+    assert [(m.topic, m.stamp_ns, m.digest) for m in record.published] == [
+        ('/echo_point', 12_000_000_000, None), ('/echo_text', None, zlib.crc32(b'HELLO'))]
+    # Outside a callback (a background job's thread, the node's start): no record lists it.
+    echo.text_pub.publish(String(data='unlisted'))
+    text_pub.publish(String(data='again'))
+    assert spin_until(executor, lambda: len(records) == 2)
+    assert [(m.topic, m.digest) for m in records[1].published] == [
+        ('/echo_point', None), ('/echo_text', zlib.crc32(b'AGAIN'))]
 
 
 def test_a_changed_spring_stiffness_fails_naming_the_topics(recorded, tmp_path, capsys):

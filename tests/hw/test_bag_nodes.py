@@ -127,6 +127,38 @@ def test_recorder_records_a_sensor_and_a_reliable_topic_and_the_bag_reads_back_e
         assert got.velocity.size == 0
 
 
+def test_recorder_counts_each_topic_s_matched_publishers_as_they_come_and_go(executor,
+                                                                            tmp_path):
+    # A topic is found by its first publisher; a second one (the bag regression's three nodes
+    # on /callback_log) is matched on its own: a run waits for the count, not for the topic.
+    source = rclpy.create_node('source', context=executor.context)
+    first = source.create_publisher(String, 'report', RELIABLE_QOS)
+    executor.add_node(source)
+    recorder = BagRecorder(context=executor.context, parameter_overrides=overrides(
+        topics=['report'], output=str(tmp_path / 'run')))
+    executor.add_node(recorder)
+    assert spin_until(executor, lambda: recorder.matched_publishers.get('/report') == 1), \
+        recorder.matched_publishers
+    other = rclpy.create_node('other', context=executor.context)
+    second = other.create_publisher(String, 'report', RELIABLE_QOS)
+    executor.add_node(other)
+    assert spin_until(executor, lambda: recorder.matched_publishers['/report'] == 2), \
+        recorder.matched_publishers
+    # Matched means recorded: what the second publisher sends now is in the bag.
+    second.publish(String(data='from the second'))
+    assert spin_until(executor, lambda: recorder.bag.counts.get('/report') == 1)
+    other.destroy_publisher(second)
+    assert spin_until(executor, lambda: recorder.matched_publishers['/report'] == 1), \
+        recorder.matched_publishers
+    first.publish(String(data='from the first'))
+    assert spin_until(executor, lambda: recorder.bag.counts.get('/report') == 2)
+    for node in (recorder, other, source):
+        executor.remove_node(node)
+        node.destroy_node()
+    assert [deserialize(m.data, m.msgtype).data for m in read_messages(tmp_path / 'run')] == [
+        'from the second', 'from the first']
+
+
 def test_recorder_defaults_and_rejected_parameters(ros_context, tmp_path):
     recorder = BagRecorder(context=ros_context, parameter_overrides=overrides(
         topics=['joint_states'], output=str(tmp_path / 'a')))

@@ -7,7 +7,7 @@ process), on simulated time, and never spun. Their publishers are a `Publisher` 
 simulated time. A node's background jobs (`LatestJobWorker`) are waited for after each callback.
 """
 
-from collections import Counter, defaultdict
+from collections import Counter, defaultdict, deque
 from collections.abc import Iterable, Mapping, Sequence
 import contextlib
 import os
@@ -23,11 +23,12 @@ from rclpy.time import Time
 
 from inflarm_bringup.node_io import INFRASTRUCTURE_TOPICS, NodeIo
 from inflarm_hw.bag import BagMessage, typestore
+from inflarm_hw.nodes.bag_recorder import message_class
 from inflarm_msgs_json import CallbackRecord
 from inflarm_msgs_json.ros.node import message_key
 from inflarm_msgs_json.ros.worker import LatestJobWorker
 
-__all__ = ['LockstepNodes', 'msgtype_of', 'to_cdr']
+__all__ = ['LockstepNodes', 'msgtype_of', 'published_at', 'to_cdr']
 
 
 def msgtype_of(cls: type) -> str:
@@ -47,6 +48,32 @@ def to_cdr(msg: object) -> bytes:
     msgdef = store.get_msgdef(msgtype)
     decode = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
     return bytes(store.serialize_cdr(decode(raw[4:], 0, msgdef.cls, store)[0], msgtype))
+
+
+def published_at(records: Iterable[CallbackRecord], messages: Iterable[BagMessage]
+                 ) -> list[BagMessage]:
+    """``messages`` (recorded, in record order) each timed at the callback that published it,
+    as the replay times its outputs, instead of when the recorder received it.
+
+    A message is the next one that ``records`` (each node's in its order) list as published on
+    its topic with its stamp and digest, begun before it was received: a topic reaches the
+    recorder in the order it was published. One that no record lists keeps its receive time.
+    """
+    times: dict[tuple, deque[int]] = defaultdict(deque)
+    for record in records:
+        for m in record.published:
+            times[(m.topic, m.stamp_ns, m.digest)].append(record.time_ns)
+    classes: dict[str, type] = {}
+    timed = []
+    for m in messages:
+        if m.msgtype not in classes:
+            classes[m.msgtype] = message_class(m.msgtype)
+        queue = times.get((m.topic, *message_key(deserialize_message(m.data,
+                                                                     classes[m.msgtype]))))
+        if queue and queue[0] <= m.timestamp_ns:
+            m = m._replace(timestamp_ns=queue.popleft())
+        timed.append(m)
+    return timed
 
 
 class LockstepNodes(contextlib.AbstractContextManager):

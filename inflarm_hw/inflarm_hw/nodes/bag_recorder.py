@@ -34,6 +34,7 @@ from inflarm_hw.bag import STORAGES, BagWriter, TopicQos
 from inflarm_msgs_json import CALLBACK_LOG_TOPIC
 from inflarm_msgs_json.ros.node import CALLBACK_LOG_QOS, GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
+from inflarm_msgs_json.ros.qos import subscription_events
 from inflarm_msgs_json.ros.spin import spin_node
 
 RECORD_DEPTH = 100  # absorbs bursts while the callback writes to disk
@@ -103,6 +104,8 @@ class BagRecorder(GuardedCallbacks, Node):
         output = p['output'] or time.strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
         self.bag = BagWriter(os.path.abspath(output), storage=p['storage'])  # checks output
         self.pending = list(self.topics)
+        #: Topic -> the publishers its subscription is matched with now.
+        self.matched_publishers: dict[str, int] = {}
         self.start_time = time.monotonic()
         self.discovery_timer = self.create_guarded_timer(DISCOVERY_PERIOD_S, self.discover)
         self.get_logger().info(
@@ -145,7 +148,9 @@ class BagRecorder(GuardedCallbacks, Node):
             qos = recording_qos(offered, CALLBACK_LOG_QOS.depth if topic == CALLBACK_LOG_TOPIC
                                 else RECORD_DEPTH)
             self.create_guarded_subscription(
-                msg_class, topic, functools.partial(self.on_message, topic), qos, raw=True)
+                msg_class, topic, functools.partial(self.on_message, topic), qos, raw=True,
+                event_callbacks=subscription_events(
+                    self, topic, matched=functools.partial(self.on_matched, topic)))
             self.get_logger().info(
                 f'recording {topic} ({msgtype}, {qos.reliability.name.lower()}, '
                 f'{qos.durability.name.lower()})')
@@ -156,6 +161,13 @@ class BagRecorder(GuardedCallbacks, Node):
         if time.monotonic() - self.start_time >= timeout:
             self.problems.warn('discovery', f'no publisher yet on {self.pending} after '
                                             f'{timeout} s; still looking', kind='no publisher')
+
+    def on_matched(self, topic: str, status) -> None:
+        # Found is not matched: each publisher is matched on its own, up to seconds later
+        # under load, and what it published before is not recorded.
+        self.matched_publishers[topic] = count = status.current_count
+        self.get_logger().info(
+            f'{topic}: recording from {count} publisher{"" if count == 1 else "s"}')
 
     def on_message(self, topic: str, data: bytes) -> None:
         # Receive time, as ros2 bag record stores: every type has one (std_msgs/String has no

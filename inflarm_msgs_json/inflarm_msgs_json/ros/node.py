@@ -15,21 +15,25 @@ incompatible QoS offers, which otherwise drop every message silently.
 With the parameter ``callback_log`` true, each guarded subscription and timer callback, once
 it ran, publishes a `CallbackRecord` on ``/callback_log``: which callback, the node's clock
 when it began (``callback_time``, which a callback reads instead of the clock where the
-reading shapes an output) and which message it took. ``inflarm-bag-regression`` replays a bag
+reading shapes an output) and which message it took, and which it published (the node's
+publishers note them), so that each recorded output is compared with the replayed output of its
+own callback, however late the recorder received it. ``inflarm-bag-regression`` replays a bag
 of them callback by callback, in the recorded order, calling ``guarded_callbacks``.
 """
 
 from collections.abc import Callable
 import functools
+import threading
 import zlib
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.publisher import Publisher
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from std_msgs.msg import String
 
-from inflarm_msgs_json.messages import CALLBACK_LOG_TOPIC, CallbackRecord
+from inflarm_msgs_json.messages import CALLBACK_LOG_TOPIC, CallbackRecord, PublishedMessage
 from inflarm_msgs_json.ros.conversions import to_string_msg
 from inflarm_msgs_json.ros.problems import ProblemReporter
 from inflarm_msgs_json.ros.qos import subscription_events
@@ -52,6 +56,9 @@ def message_key(msg: object) -> tuple[int | None, int | None]:
 class GuardedCallbacks:
     """Mixin for ``rclpy.node.Node`` and ``rclpy.lifecycle.LifecycleNode``; list it first."""
 
+    # a class attribute: Node.__init__ creates publishers before this __init__ can set it
+    _noting_publisher: type[Publisher] | None = None
+
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.problems = ProblemReporter(self.get_logger())
@@ -66,11 +73,22 @@ class GuardedCallbacks:
         self.guarded_callbacks: dict[str, tuple[type | None, Callable]] = {}
         self._callback_log = None
         self._callback_time: Time | None = None
+        # the running logged callback's PublishedMessage list; per thread, so that a background
+        # job's publishing is no callback's
+        self._logged = threading.local()
         if self.declare_parameter('callback_log', False, ParameterDescriptor(
                 description='publish a record of each callback on /callback_log, for '
                 'inflarm-bag-regression', read_only=True)).value:
             self._callback_log = self.create_publisher(String, CALLBACK_LOG_TOPIC,
                                                        CALLBACK_LOG_QOS)
+            self._noting_publisher = _noting_publisher(self._logged)
+
+    def create_publisher(self, *args, **kwargs) -> Publisher:
+        """``Node.create_publisher``; with ``callback_log``, its messages are noted in the
+        record of the callback that publishes them."""
+        if self._noting_publisher is not None:
+            kwargs.setdefault('publisher_class', self._noting_publisher)
+        return super().create_publisher(*args, **kwargs)
 
     def create_guarded_subscription(self, msg_type, topic: str, callback, qos, **kwargs):
         """``create_subscription`` whose callback is guarded under the topic's name."""
@@ -115,10 +133,27 @@ class GuardedCallbacks:
 
         def logged(*msg) -> None:
             stamp, digest = message_key(msg[0]) if msg else (None, None)
-            started = timed(*msg)
+            self._logged.published = published = []
+            try:
+                started = timed(*msg)
+            finally:
+                self._logged.published = None
             self._callback_log.publish(to_string_msg(CallbackRecord(
-                self.get_fully_qualified_name(), name, started.nanoseconds, stamp, digest)))
+                self.get_fully_qualified_name(), name, started.nanoseconds, stamp, digest,
+                tuple(published))))
         return logged
+
+
+def _noting_publisher(logged: threading.local) -> type[Publisher]:
+    """A ``Publisher`` class that notes each message it publishes (with a stamp or a text) in
+    ``logged.published`` while that is a list."""
+    class NotingPublisher(Publisher):
+        def publish(self, msg) -> None:
+            super().publish(msg)
+            published = getattr(logged, 'published', None)
+            if published is not None and (key := message_key(msg)) != (None, None):
+                published.append(PublishedMessage(self.topic_name, *key))
+    return NotingPublisher
 
 
 def _transition_request(callback):
