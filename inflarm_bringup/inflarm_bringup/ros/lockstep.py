@@ -55,9 +55,10 @@ def published_at(records: Iterable[CallbackRecord], messages: Iterable[BagMessag
     """``messages`` (recorded, in record order) each timed at the callback that published it,
     as the replay times its outputs, instead of when the recorder received it.
 
-    A message is the next one that ``records`` (each node's in its order) list as published on
-    its topic with its stamp and digest, begun before it was received: a topic reaches the
-    recorder in the order it was published. One that no record lists keeps its receive time.
+    Each takes the time of the first record not yet taken (``records``: each node's in its
+    order) that lists a message of its topic, stamp and digest and began before it was
+    received: a topic reaches the recorder in the order it was published. One that no record
+    lists keeps its receive time.
     """
     times: dict[tuple, deque[int]] = defaultdict(deque)
     for record in records:
