@@ -116,12 +116,21 @@ class Rig:
             Parameter('fault.duration_s', value=float(duration_s)),
             Parameter('fault.kind', value=kind)])
 
-    def call(self, name, request):
+    def call(self, name, request, resend_s: float | None = None):
+        """The reply to ``request``; a query (``resend_s``) is sent again when no reply came
+        within so long. A service that has not yet matched the client's reply reader drops the
+        reply (rmw_fastrtps waits 100 ms for it, ros2/rmw_fastrtps#390): seen once in 12 full
+        runs, on the first call after the bridge started, beside two CPU hogs."""
         client = self.clients[name]
         assert client.wait_for_service(timeout_sec=10.0), name
-        future = client.call_async(request)
-        assert self.run(future.done, timeout_s=10.0), f'{name}: no reply'
-        return future.result()
+        deadline = time.monotonic() + 10.0
+        while True:
+            future = client.call_async(request)
+            timeout_s = min(resend_s or math.inf, deadline - time.monotonic())
+            if self.run(future.done, timeout_s=timeout_s):
+                return future.result()
+            client.remove_pending_request(future)
+            assert time.monotonic() < deadline, f'{name}: no reply'
 
     def reset_fault(self) -> Trigger.Response:
         return self.call('/hw_bridge/reset_fault', Trigger.Request())
@@ -132,7 +141,8 @@ class Rig:
         return self.call('/hw_bridge/change_state', request).success
 
     def lifecycle_state(self) -> str:
-        return self.call('/hw_bridge/get_state', GetState.Request()).current_state.label
+        return self.call('/hw_bridge/get_state', GetState.Request(),
+                         resend_s=2.0).current_state.label
 
     def publish_link_status(self, link, moment) -> None:
         self.link_status_pub.publish(to_string_msg(
