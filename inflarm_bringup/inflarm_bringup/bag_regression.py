@@ -63,7 +63,8 @@ class Replay:
     """A replay's outcome: the nodes under test and each one's parameter files, in order; input
     topic -> messages taken from the bag; node -> callbacks run; the records skipped, with their
     node (their message is in neither the bag nor the replay); everything the nodes published,
-    in order, stamped with the simulated time [ns]."""
+    in order, stamped with the simulated time [ns]; every node's records in the bag
+    (`callback_records`), which time the recorded outputs."""
 
     nodes: tuple[NodeIo, ...]
     params_files: Mapping[str, tuple[str, ...]]
@@ -71,6 +72,7 @@ class Replay:
     callbacks: Mapping[str, int]
     skipped: tuple[tuple[str, CallbackRecord], ...]
     outputs: tuple[BagMessage, ...]
+    records: Mapping[str, Sequence[CallbackRecord]]
 
     @property
     def compared_topics(self) -> list[str]:
@@ -161,13 +163,14 @@ def replay(bag: str | os.PathLike, nodes: Sequence[str] | None = None,
         ordered = sorted(((n, r) for n in names for r in records[n]),
                          key=lambda item: item[1].time_ns)  # stable: each node's own order
         callbacks, inputs, skipped = under_test.run(ordered, recorded)
-        return Replay(ios, node_files, inputs, callbacks, skipped, tuple(under_test.outputs))
+        return Replay(ios, node_files, inputs, callbacks, skipped, tuple(under_test.outputs),
+                      records)
 
 
 def regression(bag: str | os.PathLike, result: Replay,
                tolerances: Tolerances = DEFAULT_TOLERANCES,
                skip_start_s: float = SKIP_START_S) -> Report:
-    """Compare the replay ``result`` with the outputs recorded in ``bag``: every compared
+    """Compare the replay ``result`` of ``bag`` with the outputs recorded in it: every compared
     output topic of the nodes under test that the bag holds, each from ``skip_start_s`` [s]
     after its node's first recorded output; each recorded output timed at the callback that
     published it (`published_at`).
@@ -185,7 +188,7 @@ def regression(bag: str | os.PathLike, result: Replay,
 
     in_bag = bag_info(bag).topics
     topics = [t for t in result.compared_topics if t in in_bag]
-    records = [r for node in callback_records(bag).values() for r in node]
+    records = [r for node in result.records.values() for r in node]
     recorded = published_at(records, read_messages(bag, topics))
     starts = {}
     for io in result.nodes:
