@@ -332,11 +332,6 @@ class PidIlcController:
         ``bellows_preload``: the bellows pushing towards ``+x`` and ``+y``, B4 and B3)."""
         return self._chamber.copy()
 
-    @property
-    def steps_taken(self) -> int:
-        """Control steps taken in the current trial."""
-        return self._k
-
     def start_trial(
         self,
         start: npt.ArrayLike,
