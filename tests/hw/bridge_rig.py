@@ -120,8 +120,7 @@ class Rig:
         """The reply to ``request``; a query (``resend_s``) is sent again when no reply came
         within so long. A service that has not yet matched the client's reply reader drops the
         reply (rmw_fastrtps waits for it up to max_blocking_time, 100 ms by default:
-        ros2/rmw_fastrtps#390, #704): seen once in 12 full runs, on the first call after the
-        bridge started, beside two CPU hogs."""
+        ros2/rmw_fastrtps#390, #704). Transitions are not resent: one must not run twice."""
         client = self.clients[name]
         assert client.wait_for_service(timeout_sec=10.0), name
         deadline = time.monotonic() + 10.0
