@@ -29,8 +29,10 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    through its points without the far ones, an ellipse when 85 % of the outline is on it.
    ``confidence`` is the fraction of rays on the outline; a candidate is accepted (`_accept`) if
    it is high enough, the outline not too elongated, its radius in range, the rays off it
-   one hidden arc at most, or two where 70 % of the outline is found (`_one_hidden_arc`), and
-   the ball's colour saturated (`DetectorParams.min_saturation`). The accepted candidate whose
+   one hidden arc at most, or two where 70 % of the outline is found (`_one_hidden_arc`; the
+   fine pass's rays, from the coarse outline's centre, judge that: a coarse outline on
+   ``min_confidence`` of its rays places the fine pass however its rays fall), and the ball's
+   colour saturated (`DetectorParams.min_saturation`). The accepted candidate whose
    outline is on the most rays wins (a speck's whole outline is fewer rays than most of a
    ball's; the search stops at one on every ray of the most there are). Where none is
    accepted, each is refined again from 1.3 times its radius (a shaded ball's blob can be half
@@ -856,7 +858,7 @@ def _own_share(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], ra
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
                ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams,
                margin_px: float = 0.0, sigma: float | None = None,
-               channel: str = 'blind') -> BallDetection | None:
+               channel: str = 'blind', placing: bool = False) -> BallDetection | None:
     """Sub-pixel outline of a ball of colour ``ball_bgr`` near ``center`` with a radius near
     ``r0`` [px]: rays from ``center``, their edges (`_edges`, searched within
     ``0.15 r0 + 3 + margin_px`` of ``r0``), the robust fit (`_fit_outline`). The edges are
@@ -866,7 +868,10 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     halves the chroma's), with each ray's inside level measured and either polarity (a shaded
     ball is brighter than its surround on one side, darker on another). None if the colour is
     unknown or too grey, the inside of the outline is not of that colour (`_MIN_OWN_SHARE` of
-    the fitted disc), or nothing around the ball differs from it clearly."""
+    the fitted disc), nothing around the ball differs from it clearly, or the rays off the
+    outline are not what a partly hidden ball leaves (`_one_hidden_arc`). An outline that only
+    places the fine pass (``placing``) is kept without that last check where it is on
+    ``min_confidence`` of its rays: the fine pass, with rays from its centre, makes it."""
     if not _coloured(ball_bgr, params):
         return None
     n_rays = int(np.clip(round(2.0 * math.pi * r0), _MIN_RAYS, _MAX_RAYS))
@@ -921,8 +926,9 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     if result is None:
         return None
     fit, inliers = result
-    if not _one_hidden_arc(inliers, _MAX_HIDDEN_ARC if r0 >= _COARSE_MIN_RADIUS_PX
-                           else _MAX_HIDDEN_ARC_SMALL):
+    placed = placing and inliers.mean() >= params.min_confidence
+    max_hidden = _MAX_HIDDEN_ARC if r0 >= _COARSE_MIN_RADIUS_PX else _MAX_HIDDEN_ARC_SMALL
+    if not placed and not _one_hidden_arc(inliers, max_hidden):
         return None
     (cx, cy), (fw, fh), angle = fit
     a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)
@@ -995,8 +1001,10 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
     small = r0 < _COARSE_MIN_RADIUS_PX
     fine = None
     for channel in ('blind', 'luma') if small else ('coarse', 'blind', 'luma'):
+        # the wide pass only places the fine one, which judges the outline; a small
+        # candidate's wide pass is judged too (its rays are few, and specks of its size many)
         first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
-                           channel=channel)
+                           channel=channel, placing=not small)
         if first is not None:
             # the outline measured again with rays from its own centre: from an off-centre
             # start the rays meet a part of the outline more often than its share of it

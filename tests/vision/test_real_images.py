@@ -147,12 +147,13 @@ def test_a_ball_whose_colour_blob_is_smaller_than_it_is_found_from_a_larger_radi
     assert centre_error(case) >= 1.0
 
 
-@pytest.mark.parametrize(('seed', 'quality'), [(229, 75), (243, None), (243, 95)])
+@pytest.mark.parametrize(('seed', 'quality'), [(229, 75)])
 def test_a_large_hidden_ball_is_believed_on_a_long_arc_of_its_outline(
         seed, quality, monkeypatch):
-    # held-out scenes: balls of 97-111 px, 17-22 % of the outline hidden by a bar (and, in 243,
-    # blurred by motion); the second refinement finds 60-80 % of the outline, hundreds of px
-    # of arc, and a circle that long is believed
+    # a held-out scene: a 111 px ball, 22 % of the outline hidden by a bar; the second
+    # refinement finds 60-80 % of the outline, hundreds of px of arc, and a circle that long is
+    # believed (scene 243, a 97 px ball, is found in the first round since the wide pass only
+    # places the fine one)
     case = real_case(seed, quality)
     assert case.radius > 80.0 and case.conditions.occlusion > 0.15
     detection = detect_ball(case.image)
@@ -194,12 +195,13 @@ def test_a_fine_outline_off_its_rough_centre_is_measured_again_from_its_own(seed
     assert centre_error(case) >= 1.0
 
 
-@pytest.mark.parametrize(('seed', 'quality'), [(162, 75), (301, 75), (152, 75)])
+@pytest.mark.parametrize(('seed', 'quality'), [(162, 75), (301, 75)])
 def test_a_ball_of_8_to_12_px_whose_rays_fail_is_found_from_its_whole_disc(seed, quality,
                                                                          monkeypatch):
-    # held-out scenes at JPEG 75: balls of 8-10 px defocused by 1.7-2.2 px (162 also 22 %
-    # hidden, 152) or blurred by a 5.7 px motion (301): their candidates are 8 px or more,
-    # where the disc fit was not tried
+    # held-out scenes at JPEG 75: balls of 8-10 px defocused by 2.2 px and 22 % hidden (162)
+    # or blurred by a 5.7 px motion (301): their candidates are 8 px or more, where the disc
+    # fit was not tried (scene 152 is found without it since the wide pass only places the fine
+    # one: from the larger radius)
     case = real_case(seed, quality)
     assert 8.0 < case.radius < 12.0
     assert centre_error(case) < 0.5
@@ -262,3 +264,20 @@ def test_a_large_ball_outweighs_a_speck_whose_whole_outline_is_found():
     assert tracker._accept(speck, params) and speck.radius < 5.0
     assert speck.confidence > detection.confidence
     assert len(speck.edge_points) < len(detection.edge_points)
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(6, 75), (223, 75), (223, 50), (224, 75)])
+def test_a_coarse_outline_whose_rays_fall_off_it_in_two_arcs_still_places_the_fine_pass(
+        seed, quality, monkeypatch):
+    # balls of 10-18 px at JPEG 50-75 (6 on gravel, of the set; 223 on coffee, 24 % hidden by a
+    # bar, and 224 on grace_hopper, 26 % hidden, held out): from the candidate's rough centre
+    # the wide pass finds 60-70 % of the outline, with the rays off it in arcs that
+    # `_one_hidden_arc` refuses; the fine pass from that outline's centre finds the ball
+    case = real_case(seed, quality)
+    assert 10.0 <= case.radius < 18.0
+    assert centre_error(case) < 0.6
+    # a coarse outline judged like the fine one, as before, places no fine pass: missed
+    refine_at = tracker._refine_at
+    monkeypatch.setattr(tracker, '_refine_at',
+                        lambda *args, placing=False, **kw: refine_at(*args, **kw))
+    assert centre_error(case) >= 1.0
