@@ -1001,8 +1001,8 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
     small = r0 < _COARSE_MIN_RADIUS_PX
     fine = None
     for channel in ('blind', 'luma') if small else ('coarse', 'blind', 'luma'):
-        # the wide pass only places the fine one, which judges the outline; a small
-        # candidate's wide pass is judged too (its rays are few, and specks of its size many)
+        # the coarse pass only places the fine one, which judges the outline; a small
+        # candidate's coarse outline is judged too (its rays are few, and specks of its size many)
         first = _refine_at(image, center, r0, colour, params, margin_px=margin_px, sigma=sigma,
                            channel=channel, placing=not small)
         if first is not None:

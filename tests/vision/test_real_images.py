@@ -152,7 +152,7 @@ def test_a_large_hidden_ball_is_believed_on_a_long_arc_of_its_outline(
         seed, quality, monkeypatch):
     # a held-out scene: a 111 px ball, 22 % of the outline hidden by a bar; the second
     # refinement finds 60-80 % of the outline, hundreds of px of arc, and a circle that long is
-    # believed (scene 243, a 97 px ball, is found in the first round since the wide pass only
+    # believed (scene 243, a 97 px ball, is found in the first round since the coarse pass only
     # places the fine one)
     case = real_case(seed, quality)
     assert case.radius > 80.0 and case.conditions.occlusion > 0.15
@@ -200,8 +200,8 @@ def test_a_ball_of_8_to_12_px_whose_rays_fail_is_found_from_its_whole_disc(seed,
                                                                          monkeypatch):
     # held-out scenes at JPEG 75: balls of 8-10 px defocused by 2.2 px and 22 % hidden (162)
     # or blurred by a 5.7 px motion (301): their candidates are 8 px or more, where the disc
-    # fit was not tried (scene 152 is found without it since the wide pass only places the fine
-    # one: from the larger radius)
+    # fit was not tried (scene 152 is found without it since the coarse pass only places the
+    # fine one: from the larger radius)
     case = real_case(seed, quality)
     assert 8.0 < case.radius < 12.0
     assert centre_error(case) < 0.5
@@ -271,7 +271,7 @@ def test_a_coarse_outline_whose_rays_fall_off_it_in_two_arcs_still_places_the_fi
         seed, quality, monkeypatch):
     # balls of 10-18 px at JPEG 50-75 (6 on gravel, of the set; 223 on coffee, 24 % hidden by a
     # bar, and 224 on grace_hopper, 26 % hidden, held out): from the candidate's rough centre
-    # the wide pass finds 60-70 % of the outline, with the rays off it in arcs that
+    # the coarse pass finds 60-70 % of the outline, with the rays off it in arcs that
     # `_one_hidden_arc` refuses; the fine pass from that outline's centre finds the ball
     case = real_case(seed, quality)
     assert 10.0 <= case.radius < 18.0
