@@ -36,7 +36,8 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    outline is on the most rays wins (a speck's whole outline is fewer rays than most of a
    ball's; the search stops at one on every ray of the most there are). Where none is
    accepted, each is refined again from 1.3 times its radius (a shaded ball's blob can be half
-   its disc), believed on 80 % of the outline.
+   its disc), believed on 80 % of the outline; where none is then, the large candidates of the
+   colour mask with its threads cut (a ball joined by a thread to a wider thing of its colour).
 4. **Small balls** (under 12 px): where their rays give no accepted outline (a blur of a third
    of the radius leaves too few samples for an edge's levels), the whole blurred disc is
    fitted to the ball-blind channel around the candidate (`_fit_disc`: a blurred ellipse on a
@@ -239,6 +240,8 @@ _CONFIDENT = 0.9  # confidence of a fine pass below which the luma pass measures
 # how far under min_radius_px the fitted radius of an outline found whole (`_CONFIDENT`) may
 # be [px]: a ball of a few pixels, in JPEG, measures that much smaller or larger than it is
 _RADIUS_TOLERANCE_PX = 0.5
+_THREAD_CUT = np.ones((3, 3), np.uint8)  # opening of the colour mask that cuts its threads
+_NEW_CANDIDATE = 0.5  # distance from the candidates tried, over its radius, of a new one
 _RETRY_SCALE = 1.3  # radius of a refused candidate's second refinement, over its blob's
 _RETRY_MIN_CONFIDENCE = 0.8  # share of the outline that second refinement must find ...
 _RETRY_MIN_ARC_PX = 100.0  # ... or this much of it (80 % of a 20 px ball's), if >= min_confidence
@@ -1153,7 +1156,7 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     """The candidates of ``region`` (decimated as `DetectorParams.decimation` says) refined
     at full resolution: the accepted one whose outline is on the most rays (or, with
     ``near``, the first accepted in order of distance from it); where none is, the same from
-    a larger radius."""
+    a larger radius, then with the colour mask's threads cut."""
     h, w = image.shape[:2]
     u0, v0, u1, v1 = (int(x) for x in region)
     u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
@@ -1168,24 +1171,44 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     if params.opening_px > 1 and params.min_radius_px / s >= params.opening_px:
         kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
-    # tracking tries the candidates by distance: all of them; a whole-frame search the best,
-    # then the best large one (specks of the ball's colour, as on gravel, can outnumber a ball
-    # whose blob merged with some of them, and outscore it)
-    candidates = _candidates(mask, hsv[:, :, 1], s, params.min_radius_px, params,
-                             limit=None if near is not None else params.max_candidates)
-    # pixel i of the decimated image covers image pixels s i .. s i + s - 1
-    guesses = [(np.array([u0, v0]) + s * centre + 0.5 * (s - 1), s * radius)
-               for _, centre, radius in candidates]
-    if near is not None:
-        target = np.asarray(near, dtype=float)
-        guesses.sort(key=lambda g: float(np.hypot(*(g[0] - target))))
-        del guesses[params.max_candidates:]
+
+    def guesses_in(blobs: npt.NDArray[np.uint8], min_radius_px: float) -> list:
+        """The candidates of a colour mask, ``(centre, radius)`` in image px, in the order
+        they are tried."""
+        # tracking tries the candidates by distance: all of them; a whole-frame search the
+        # best, then the best large one (specks of the ball's colour, as on gravel, can
+        # outnumber a ball whose blob merged with some of them, and outscore it)
+        candidates = _candidates(blobs, hsv[:, :, 1], s, min_radius_px, params,
+                                 limit=None if near is not None else params.max_candidates)
+        # pixel i of the decimated image covers image pixels s i .. s i + s - 1
+        guesses = [(np.array([u0, v0]) + s * centre + 0.5 * (s - 1), s * radius)
+                   for _, centre, radius in candidates]
+        if near is not None:
+            target = np.asarray(near, dtype=float)
+            guesses.sort(key=lambda g: float(np.hypot(*(g[0] - target))))
+            del guesses[params.max_candidates:]
+        return guesses
+
+    def rounds():
+        """``(guesses, radius scale, retry)`` of each round, the next where one finds none."""
+        guesses = guesses_in(mask, params.min_radius_px)
+        yield guesses, 1.0, False
+        # the blob may be smaller than the ball (its shaded limb falls below the colour
+        # thresholds): each is refined again from a larger radius, whose rays can also cross
+        # a half disc's straight cut into the texture beyond, so only most of an outline, or
+        # a long arc of it, is believed there (`_retry_min_confidence`)
+        yield guesses, _RETRY_SCALE, True
+        # a ball joined by a thread to a wider thing of its colour is none of them (their
+        # blob's largest disc is in the wider part): the large candidates of the mask with
+        # its threads of 1-2 px cut, those that are new
+        cut = guesses_in(cv2.morphologyEx(mask, cv2.MORPH_OPEN, _THREAD_CUT),
+                         2.0 * params.min_radius_px)
+        yield [(centre, radius) for centre, radius in cut
+               if all(np.hypot(*(centre - tried)) >= _NEW_CANDIDATE * radius
+                      for tried, _ in guesses)], 1.0, False
+
     colour = None if prior is None else prior.colour_bgr
-    # the blob may be smaller than the ball (its shaded limb falls below the colour
-    # thresholds): where no candidate is accepted, each is refined again from a larger radius,
-    # whose rays can also cross a half disc's straight cut into the texture beyond, so only
-    # most of an outline, or a long arc of it, is believed there (`_retry_min_confidence`)
-    for scale, retry in ((1.0, False), (_RETRY_SCALE, True)):
+    for guesses, scale, retry in rounds():
         best = None
         for i, (centre, radius) in enumerate(guesses):
             if i == params.max_candidates and best is not None:

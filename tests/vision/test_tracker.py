@@ -201,6 +201,21 @@ def test_the_largest_disc_of_a_blob_does_not_follow_the_last_bit_of_its_distance
     assert len(exact) == 1 and exact[0][2] == 11.5  # the peak, 11 px from the edge, + 0.5
 
 
+def test_a_ball_joined_by_a_thread_to_a_wider_thing_of_its_colour_is_found():
+    # their colour blobs are one, whose largest disc is in the wider bar; with the thread
+    # cut, the ball is a blob of its own
+    image = np.full((240, 320, 3), 90, np.uint8)
+    yellow = (30, 200, 230)
+    cv2.rectangle(image, (200, 20), (269, 220), yellow, cv2.FILLED)  # 70 px wide
+    cv2.circle(image, (96 * 16, 120 * 16), 28 * 16, yellow, cv2.FILLED, cv2.LINE_AA, shift=4)
+    cv2.line(image, (120, 120), (200, 120), yellow, 2)
+    image = cv2.GaussianBlur(image, (0, 0), 0.8)
+    detection = detect_ball(image)
+    assert detection is not None
+    assert np.hypot(*(detection.center - (96.0, 120.0))) < 0.3
+    assert detection.radius == pytest.approx(28.5, abs=0.5)  # LINE_AA's edge is 0.5 px out
+
+
 def test_edges_finds_the_outline_of_a_blurred_disc_and_its_blur():
     # the compiled edge kernel on the exact radial profile of a disc of radius R blurred by a
     # Gaussian of sigma: the share of the blur kernel outside the disc is a Rice survival
