@@ -38,6 +38,10 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    accepted, each is refined again from 1.3 times its radius (a shaded ball's blob can be half
    its disc), believed on 80 % of the outline; where none is then, the large candidates of the
    colour mask with its threads cut (a ball joined by a thread to a wider thing of its colour).
+   The winner, where it is on less than 90 % of its rays, is **polished** (`_polish`, and so is
+   the tracking pass's outline): measured once more in the ball-blind channel with the luma at
+   the chroma's resolution (under JPEG the two resolutions bias that channel's half level) and
+   moved there where that finds more of the outline.
 4. **Small balls** (under 12 px): where their rays give no accepted outline (a blur of a third
    of the radius leaves too few samples for an edge's levels), the whole blurred disc is
    fitted to the ball-blind channel around the candidate (`_fit_disc`: a blurred ellipse on a
@@ -55,7 +59,7 @@ area). For the ball's 3D position use the edge points (`inflarm_vision.geometry.
 off the optical axis the ellipse's centre is not the image of the ball's centre.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import functools
 import math
 
@@ -258,6 +262,7 @@ _DISC_MAX_RADIUS_PX = 12.0  # largest candidate whose disc is fitted where its r
 _MOVED_PX = 0.25  # a fine outline this far from its start is measured again from it [px]
 _FINE_REPEATS = 2  # at most this many times
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
+_POLISH_MAX_MOVE_PX = 1.5  # a polished outline farther from the accepted one is another one [px]
 
 
 def _channels(ball_bgr) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
@@ -1031,6 +1036,56 @@ def _refine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: f
     return fine
 
 
+def _luma_at_chroma_resolution(
+        image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64],
+        reach: float) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.float64]]:
+    """The part of ``image`` within ``reach`` px of ``center`` with its luma (JPEG's YCrCb) at
+    the resolution of 4:2:0 chroma: averaged over the 2 x 2 blocks JPEG's chroma is averaged
+    over (from even pixels), then interpolated back (libjpeg's upsampling); and the part's
+    top-left pixel ``(u, v)`` in the image."""
+    h, w = image.shape[:2]
+    u0 = max(int(center[0] - reach), 0) & ~1
+    v0 = max(int(center[1] - reach), 0) & ~1
+    u1, v1 = min(int(center[0] + reach) + 2, w), min(int(center[1] + reach) + 2, h)
+    part = image[v0:v1, u0:u1]
+    height, width = part.shape[:2]
+    if height % 2 or width % 2:
+        part = cv2.copyMakeBorder(part, 0, height % 2, 0, width % 2, cv2.BORDER_REPLICATE)
+    ycrcb = cv2.cvtColor(part, cv2.COLOR_BGR2YCrCb)
+    halved = cv2.resize(np.ascontiguousarray(ycrcb[:, :, 0]), (part.shape[1] // 2,
+                        part.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    ycrcb[:, :, 0] = cv2.resize(halved, (part.shape[1], part.shape[0]),
+                                interpolation=cv2.INTER_LINEAR)
+    return (cv2.cvtColor(ycrcb, cv2.COLOR_YCrCb2BGR)[:height, :width],
+            np.array([u0, v0], dtype=np.float64))
+
+
+def _polish(image: npt.NDArray[np.uint8], detection: BallDetection,
+            params: DetectorParams) -> BallDetection:
+    """An accepted outline found on less than `_CONFIDENT` of its rays, measured once more in
+    the ball-blind channel with the luma at the chroma's resolution
+    (`_luma_at_chroma_resolution`): under JPEG's 4:2:0 that channel sums a sharp luma step and
+    a chroma step twice as wide, whose half level can be a pixel off the edge; at one
+    resolution it is one blurred step. The polished outline where it is accepted, on a larger
+    share of its rays and within `_POLISH_MAX_MOVE_PX` of the first (with the first's blur,
+    which tracking reuses on the image as it is); else ``detection``. It moves a ball, never
+    finds one: in every pass, the blurred luma rounds small things of the ball's colour off
+    into balls."""
+    if detection.confidence >= _CONFIDENT:
+        return detection  # most of the outline agrees already; the pass costs a fine one's time
+    # the rays of `_refine_at` reach 1.15 r + 11 px from the centre; 2 px more for the filter
+    part, corner = _luma_at_chroma_resolution(image, detection.center,
+                                              1.15 * detection.radius + 13.0)
+    polished = _refine_at(part, detection.center - corner, detection.radius,
+                          detection.colour_bgr, params)
+    if (not _accept(polished, params) or polished.confidence <= detection.confidence
+            or math.hypot(*(polished.center + corner - detection.center))
+            >= _POLISH_MAX_MOVE_PX):
+        return detection
+    return replace(polished, center=polished.center + corner,
+                   edge_points=polished.edge_points + corner, blur_px=detection.blur_px)
+
+
 def _fine(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
           colour: npt.NDArray, params: DetectorParams, margin_px: float = 0.0,
           sigma: float | None = None) -> BallDetection | None:
@@ -1156,7 +1211,7 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     """The candidates of ``region`` (decimated as `DetectorParams.decimation` says) refined
     at full resolution: the accepted one whose outline is on the most rays (or, with
     ``near``, the first accepted in order of distance from it); where none is, the same from
-    a larger radius, then with the colour mask's threads cut."""
+    a larger radius, then with the colour mask's threads cut; polished (`_polish`)."""
     h, w = image.shape[:2]
     u0, v0, u1, v1 = (int(x) for x in region)
     u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
@@ -1219,7 +1274,8 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
                     retry and detection.confidence < _retry_min_confidence(detection.radius)):
                 continue
             if near is not None:
-                return detection
+                best = detection
+                break  # tracking: the first accepted by distance
             # the most rays on the outline, not the largest share of them: a gravel speck's
             # whole outline (32 rays) must not outweigh nearly all of a large ball's (96)
             if best is None or len(detection.edge_points) > len(best.edge_points):
@@ -1227,7 +1283,7 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
             if len(best.edge_points) >= _MAX_RAYS:
                 break  # every ray of the most there are: no later candidate can have more
         if best is not None:
-            return best
+            return _polish(image, best, params)
     return None
 
 
@@ -1347,7 +1403,9 @@ class BallTracker:
             margin = 1.0 + min(3.0 * float(np.hypot(*velocity)), last.radius)
             detection = _fine(image, last.center + velocity, last.radius, last.colour_bgr,
                               self.params, margin_px=margin, sigma=sigma)
-            if not _accept(detection, self.params):
+            if _accept(detection, self.params):
+                detection = _polish(image, detection, self.params)
+            else:
                 self.region_searches += 1
                 half = self.search_radii * last.radius + self.search_margin_px
                 u, v = last.center + velocity
