@@ -249,6 +249,7 @@ _NEW_CANDIDATE = 0.5  # distance from the candidates tried, over its radius, of 
 _RETRY_SCALE = 1.3  # radius of a refused candidate's second refinement, over its blob's
 _RETRY_MIN_CONFIDENCE = 0.8  # share of the outline that second refinement must find ...
 _RETRY_MIN_ARC_PX = 100.0  # ... or this much of it (80 % of a 20 px ball's), if >= min_confidence
+_TINY_MIN_SEPARATION = 5.0  # smallest separation from its surround of a ball from a tiny blob
 _JIT = dict(cache=True, nogil=True, error_model='numpy')  # the compiled kernels, cached
 # a small ball's whole blurred disc (`_fit_disc`), where its rays fail
 _DISC_MIN_CONTRAST = 12.0  # smallest step of the ball-blind channel at its edge [grey levels]
@@ -850,17 +851,40 @@ def _blind_channel(inside: npt.NDArray[np.float32], outside: npt.NDArray[np.floa
     return weights, _separation(inside, outside, weights)
 
 
-def _own_share(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], radius: float,
-               ball_bgr: npt.NDArray[np.float64]) -> float:
-    """Share of the disc within 0.7 ``radius`` of ``center`` that is of the ball's colour (256
-    samples spread evenly over its area; a highlight is not of it)."""
-    rings = 0.7 * radius * np.sqrt((np.arange(8) + 0.5) / 8.0)
+def _ring_samples(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], inner: float,
+                  outer: float) -> npt.NDArray[np.float32]:
+    """BGR samples (256, 3) of the ring from ``inner`` to ``outer`` px round ``center`` (0:
+    a disc), spread evenly over its area."""
+    rings = np.sqrt(inner * inner + (outer * outer - inner * inner)
+                    * (np.arange(8) + 0.5) / 8.0)
     cos, sin = _ray_directions(32)
     map_x = (center[0] + np.outer(rings, cos)).astype(np.float32)
     map_y = (center[1] + np.outer(rings, sin)).astype(np.float32)
-    samples = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3).astype(np.float32)
+    return cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3).astype(np.float32)
+
+
+def _own_share(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], radius: float,
+               ball_bgr: npt.NDArray[np.float64]) -> float:
+    """Share of the disc within 0.7 ``radius`` of ``center`` that is of the ball's colour (a
+    highlight is not of it)."""
+    samples = _ring_samples(image, center, 0.0, 0.7 * radius)
     return float(np.mean(_of_ball_colour(samples, ball_bgr)))
+
+
+def _surround_separation(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64],
+                         radius: float, ball_bgr: npt.NDArray[np.float64] | None,
+                         params: DetectorParams) -> float:
+    """How clearly a ball's colour stands out from its surround: the separation
+    (`_blind_channel`) of its own samples within 0.7 ``radius`` of ``center`` from those of the
+    ring 2-6 px beyond that radius; 0 where the colour is none or the disc is not of it."""
+    if not _coloured(ball_bgr, params):
+        return 0.0
+    inside = _own_samples(_ring_samples(image, center, 0.0, 0.7 * radius), ball_bgr)
+    if inside is None:
+        return 0.0
+    return _blind_channel(inside, _ring_samples(image, center, radius + 2.0, radius + 6.0),
+                          ball_bgr)[1]
 
 
 def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0: float,
@@ -1181,6 +1205,29 @@ def _candidates(mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], 
     return found[:limit] + [c for c in found[limit:] if c[2] >= large][:1]
 
 
+def _tiny_candidates(
+        mask: npt.NDArray[np.uint8], saturation: npt.NDArray[np.uint8], scale: float,
+        min_radius_px: float,
+        limit: int | None = None) -> list[tuple[float, npt.NDArray[np.float64], float]]:
+    """The blobs of a colour mask of pixel size ``scale`` [image px] that hold 0.4-1 times the
+    pixels of the smallest ball's disc: ``(score, centre, radius)`` in mask pixels, best first
+    (at most ``limit``). `_candidates` measures a blob by the area within its contour, which
+    runs through its outer pixels' centres: on a blob of a few pixels, half of them. The score
+    is the square of the blob's mean saturation, as there; the radius that of its pixels."""
+    count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    pixels = stats[:, cv2.CC_STAT_AREA].astype(np.float64)
+    disc = math.pi * (min_radius_px / scale) ** 2
+    tiny = np.nonzero((pixels >= 0.4 * disc) & (pixels < disc))[0]
+    tiny = tiny[tiny > 0]  # label 0: the background
+    if len(tiny) == 0:
+        return []
+    vivid = (np.bincount(labels.ravel(), weights=saturation.ravel(), minlength=count)[tiny]
+             / pixels[tiny] / 255.0) ** 2
+    order = np.argsort(-vivid, kind='stable')[:limit]
+    return [(float(vivid[k]), centroids[tiny[k]].astype(np.float64),
+             math.sqrt(pixels[tiny[k]] / math.pi)) for k in order]
+
+
 def _retry_min_confidence(radius: float) -> float:
     """Share of its outline a refused candidate's second refinement must find: a half disc's
     rays from the larger radius cross its straight cut into the texture beyond, where a few
@@ -1211,7 +1258,8 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     """The candidates of ``region`` (decimated as `DetectorParams.decimation` says) refined
     at full resolution: the accepted one whose outline is on the most rays (or, with
     ``near``, the first accepted in order of distance from it); where none is, the same from
-    a larger radius, then with the colour mask's threads cut; polished (`_polish`)."""
+    a larger radius, then with the colour mask's threads cut, then of its tiny blobs;
+    polished (`_polish`)."""
     h, w = image.shape[:2]
     u0, v0, u1, v1 = (int(x) for x in region)
     u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
@@ -1227,14 +1275,14 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
         kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
 
-    def guesses_in(blobs: npt.NDArray[np.uint8], min_radius_px: float) -> list:
-        """The candidates of a colour mask, ``(centre, radius)`` in image px, in the order
-        they are tried."""
-        # tracking tries the candidates by distance: all of them; a whole-frame search the
-        # best, then the best large one (specks of the ball's colour, as on gravel, can
-        # outnumber a ball whose blob merged with some of them, and outscore it)
-        candidates = _candidates(blobs, hsv[:, :, 1], s, min_radius_px, params,
-                                 limit=None if near is not None else params.max_candidates)
+    # tracking tries the candidates by distance: all of them; a whole-frame search the best,
+    # then the best large one (specks of the ball's colour, as on gravel, can outnumber a ball
+    # whose blob merged with some of them, and outscore it)
+    limit = None if near is not None else params.max_candidates
+
+    def guesses_of(candidates: list) -> list:
+        """``(centre, radius)`` in image px of the candidates of the decimated mask, in the
+        order they are tried."""
         # pixel i of the decimated image covers image pixels s i .. s i + s - 1
         guesses = [(np.array([u0, v0]) + s * centre + 0.5 * (s - 1), s * radius)
                    for _, centre, radius in candidates]
@@ -1245,33 +1293,52 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
         return guesses
 
     def rounds():
-        """``(guesses, radius scale, retry)`` of each round, the next where one finds none."""
-        guesses = guesses_in(mask, params.min_radius_px)
-        yield guesses, 1.0, False
+        """``(guesses, radius scale, retry, tiny)`` of each round, the next where one finds
+        none."""
+        guesses = guesses_of(_candidates(mask, hsv[:, :, 1], s, params.min_radius_px, params,
+                                         limit))
+        yield guesses, 1.0, False, False
         # the blob may be smaller than the ball (its shaded limb falls below the colour
         # thresholds): each is refined again from a larger radius, whose rays can also cross
         # a half disc's straight cut into the texture beyond, so only most of an outline, or
         # a long arc of it, is believed there (`_retry_min_confidence`)
-        yield guesses, _RETRY_SCALE, True
+        yield guesses, _RETRY_SCALE, True, False
         # a ball joined by a thread to a wider thing of its colour is none of them (their
         # blob's largest disc is in the wider part): the large candidates of the mask with
         # its threads of 1-2 px cut, those that are new
-        cut = guesses_in(cv2.morphologyEx(mask, cv2.MORPH_OPEN, _THREAD_CUT),
-                         2.0 * params.min_radius_px)
+        cut = guesses_of(_candidates(cv2.morphologyEx(mask, cv2.MORPH_OPEN, _THREAD_CUT),
+                                     hsv[:, :, 1], s, 2.0 * params.min_radius_px, params, limit))
         yield [(centre, radius) for centre, radius in cut
                if all(np.hypot(*(centre - tried)) >= _NEW_CANDIDATE * radius
-                      for tried, _ in guesses)], 1.0, False
+                      for tried, _ in guesses)], 1.0, False, False
+        # a blob of a few pixels (`_tiny_candidates`): the lit part of a small dark ball whose
+        # shaded part is under the value threshold, a defocused ball's core; refined as the
+        # first ones, and believed only where the ball's colour stands out clearly from its
+        # surround (`_surround_separation`: specks of that size in wood, fur and gravel are
+        # many)
+        tiny_guesses = guesses_of(_tiny_candidates(mask, hsv[:, :, 1], s, params.min_radius_px,
+                                                   limit))
+        yield tiny_guesses, 1.0, False, True
+        yield tiny_guesses, _RETRY_SCALE, True, True
 
     colour = None if prior is None else prior.colour_bgr
-    for guesses, scale, retry in rounds():
+    for guesses, scale, retry, tiny in rounds():
         best = None
         for i, (centre, radius) in enumerate(guesses):
             if i == params.max_candidates and best is not None:
                 break  # the large candidate beyond the best is tried where they all fail
+            if tiny and _surround_separation(
+                    image, centre, scale * radius,
+                    _disc_colour(image, centre, scale * radius, params) if colour is None
+                    else colour, params) < 0.5 * _TINY_MIN_SEPARATION:
+                continue  # a ball's stands out by half as much at its rough guess already
             detection = _refine(image, centre, scale * radius, params,
                                 scale * (0.25 * radius + s), colour)
             if not _accept(detection, params) or (
-                    retry and detection.confidence < _retry_min_confidence(detection.radius)):
+                    retry and detection.confidence < _retry_min_confidence(detection.radius)) or (
+                    tiny and _surround_separation(image, detection.center, detection.radius,
+                                                  detection.colour_bgr, params)
+                    < _TINY_MIN_SEPARATION):
                 continue
             if near is not None:
                 best = detection

@@ -331,3 +331,31 @@ def test_tracking_polishes_the_outline_as_the_search_does(seed, quality, monkeyp
         second = ball_tracker.update(case.image)
         assert ball_tracker.full_frame_searches == 1 and ball_tracker.region_searches == 0
         assert (np.hypot(*(second.center - case.center)) < 1.0) == within
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(80, None), (80, 75), (168, 95), (178, 75)])
+def test_a_small_ball_of_which_the_colour_mask_holds_a_few_pixels_is_found(seed, quality,
+                                                                            monkeypatch):
+    # balls of 4.3-4.7 px: dark (exposure 0.5) on grey and on a retina's red, their shaded
+    # part under the colour thresholds, and defocused on the retina's orange, their rim blurred
+    # into it; at the candidates' scale the mask holds 6-9 of their pixels, under the area of
+    # the smallest ball's disc within the blob's contour
+    case = real_case(seed, quality)
+    assert case.radius < 5.0
+    assert centre_error(case) < 1.0
+    # without the blobs of a few pixels, missed
+    monkeypatch.setattr(tracker, '_tiny_candidates', lambda *args, **kwargs: [])
+    assert centre_error(case) == math.inf
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(146, 50), (210, 50), (370, 75), (473, 75)])
+def test_a_speck_of_a_few_pixels_is_a_ball_only_where_its_colour_stands_out(seed, quality,
+                                                                            monkeypatch):
+    # ball-free frames (gravel, a face, a cup): specks of a few pixels of the ball's colour
+    # whose outline passes for a ball's, but whose colour stands out from its surround by
+    # less than the small balls' above (3.2-4.2 of their spreads, the balls' 6.5-9.2)
+    image = ball_free_frame(seed, quality)
+    assert detect_ball(image) is None
+    monkeypatch.setattr(tracker, '_TINY_MIN_SEPARATION', 0.0)
+    detection = detect_ball(image)
+    assert detection is not None and detection.radius < 7.0

@@ -1,6 +1,8 @@
 """inflarm_vision.tracker: sub-pixel accuracy on exact renders, no false positives in clutter,
 robustness to exposure, the tracking mode and its fall-back, input validation."""
 
+import math
+
 import cv2
 import numpy as np
 import pytest
@@ -169,6 +171,33 @@ def test_the_whole_frame_search_keeps_the_candidates_it_would_rank_without_pruni
             compared += len(ranked) > limit
             with_large += len(expected) > limit
     assert compared >= 30 and with_large >= 30  # most frames have more blobs than the limit
+
+
+def test_the_tiny_candidates_are_the_blobs_smaller_than_the_smallest_balls_disc():
+    # at a scale of 2 px, a ball of 4 px covers a disc of 12.6 mask pixels: blobs of 0.4-1
+    # times that (6-12 px) are tiny candidates, best saturated first, at their pixels' centroid
+    # with the radius of their pixels' area; smaller and larger blobs are not
+    from inflarm_vision import tracker
+
+    mask = np.zeros((40, 80), np.uint8)
+    saturation = np.zeros_like(mask)
+    blobs = {5: (1, 5), 6: (2, 3), 9: (3, 3), 12: (3, 4), 13: None}  # pixels: (rows, cols)
+    for i, (pixels, shape) in enumerate(blobs.items()):
+        window = (slice(None), slice(2 + 15 * i, 12 + 15 * i))
+        if shape is None:  # 3 rows of 4 and a pixel above them
+            mask[window][10:13, 2:6] = 255
+            mask[window][9, 3] = 255
+        else:
+            mask[window][10:10 + shape[0], 2:2 + shape[1]] = 255
+        saturation[window][mask[window] > 0] = 140 + 10 * i
+        assert np.count_nonzero(mask[window]) == pixels
+    candidates = tracker._tiny_candidates(mask, saturation, 2.0, 4.0)
+    assert [round(math.pi * radius ** 2) for _, _, radius in candidates] == [12, 9, 6]
+    assert [score for score, _, _ in candidates] == pytest.approx(
+        [(170 / 255) ** 2, (160 / 255) ** 2, (150 / 255) ** 2])
+    assert np.allclose(candidates[0][1], (45 + 4 + 1.5, 10 + 1.0))  # 3 x 4 from (49, 10)
+    assert len(tracker._tiny_candidates(mask, saturation, 2.0, 4.0, limit=2)) == 2
+    assert tracker._tiny_candidates(np.zeros_like(mask), saturation, 2.0, 4.0) == []
 
 
 def test_the_largest_disc_of_a_blob_does_not_follow_the_last_bit_of_its_distances(monkeypatch):
