@@ -256,7 +256,9 @@ _DISC_MIN_CONTRAST = 12.0  # smallest step of the ball-blind channel at its edge
 # largest blur over radius: a blur near the radius rounds any blob; the spec's defocus (2.5 px)
 # of its smallest ball (4 px) is 0.63, and the fitted radius of so small a ball is larger
 _DISC_MAX_BLUR = 0.6
-_DISC_PROFILE_TOLERANCE = 0.2  # largest RMS misfit of a ray's profile, over the edge's step
+_DISC_PROFILE_TOLERANCE = 0.35  # largest RMS misfit of a ray's profile, over the edge's step
+_DISC_ORANGE_PROFILE_TOLERANCE = 0.2  # the same for a disc in the colour mask's orange end:
+_ORANGE_HUES = 4  # its lowest hues (17-20 by default; a yellow ball's are 21-30)
 _DISC_EDGE_TOLERANCE_PX = 1.0  # largest distance of a ray's half-level from the model's [px]
 _DISC_MIN_CONFIDENCE = 0.8  # share of the rays that must agree with the fitted disc
 _DISC_MAX_RADIUS_PX = 12.0  # largest candidate whose disc is fitted where its rays fail [px]
@@ -733,7 +735,9 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
     its rays for their edges' levels (`_edges`); its disc as a whole still has hundreds. A ray
     from the fitted centre agrees with the fit where its profile is within
     `_DISC_PROFILE_TOLERANCE` of the edge's step of the model's and its half level within
-    `_DISC_EDGE_TOLERANCE_PX` of the model's (a corner of another shape is off both); the
+    `_DISC_EDGE_TOLERANCE_PX` of the model's (a corner of another shape is off both); a disc
+    whose colour is in the colour mask's orange end (its `_ORANGE_HUES` lowest hues: specks
+    of wood, fur and gravel under JPEG) must fit within `_DISC_ORANGE_PROFILE_TOLERANCE`; the
     fit is believed where `_DISC_MIN_CONFIDENCE` of them agree, the rays off it are as a
     hiding thing leaves them (`_one_hidden_arc`), the step is at least `_DISC_MIN_CONTRAST`
     and the blur at most `_DISC_MAX_BLUR` of the radius. None otherwise, or if the colour or
@@ -784,7 +788,9 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
     model = _blurred_disc(p, ray_dx, ray_dy, np.empty((len(ray_dx), 9))).reshape(n_rays, -1)
     step = b0 + b1 * ray_dx.reshape(n_rays, -1)[:, -1] + b2 * ray_dy.reshape(n_rays, -1)[:, -1]
     misfit = np.sqrt(((profile - model) ** 2).mean(axis=1))
-    inliers = (step > 0.0) & (misfit <= _DISC_PROFILE_TOLERANCE * step)
+    tolerance = (_DISC_PROFILE_TOLERANCE if _hue(ball_bgr) >= params.hsv_lower[0] + _ORANGE_HUES
+                 else _DISC_ORANGE_PROFILE_TOLERANCE)
+    inliers = (step > 0.0) & (misfit <= tolerance * step)
     for i in np.nonzero(inliers)[0]:
         half_level = _crossing(profile[i] / step[i], 0.5, t[0])
         model_half_level = _crossing(model[i] / step[i], 0.5, t[0])
@@ -806,6 +812,12 @@ def _fit_disc(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0:
                          confidence=float(inliers.mean()), axes=np.array([a, b]), angle=major,
                          edge_points=fitted + distance[:, None] * directions,
                          colour_bgr=ball_bgr, blur_px=s)
+
+
+def _hue(bgr: npt.NDArray[np.float64]) -> int:
+    """Hue of a BGR colour as the colour mask sees it (OpenCV's 8-bit scale, 0-180)."""
+    pixel = np.clip(np.round(bgr), 0.0, 255.0).astype(np.uint8).reshape(1, 1, 3)
+    return int(cv2.cvtColor(pixel, cv2.COLOR_BGR2HSV)[0, 0, 0])
 
 
 def _coloured(ball_bgr: npt.NDArray[np.float64] | None, params: DetectorParams) -> bool:
