@@ -1236,8 +1236,8 @@ def _tiny_candidates(
     vivid = (np.bincount(labels.ravel(), weights=saturation.ravel(), minlength=count)[tiny]
              / pixels[tiny] / 255.0) ** 2
     order = np.argsort(-vivid, kind='stable')[:limit]
-    return [(float(vivid[k]), centroids[tiny[k]].astype(np.float64),
-             math.sqrt(pixels[tiny[k]] / math.pi)) for k in order]
+    return [(float(vivid[k]), centroids[tiny[k]], math.sqrt(pixels[tiny[k]] / math.pi))
+            for k in order]
 
 
 def _retry_min_confidence(radius: float) -> float:
@@ -1339,13 +1339,16 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
         for i, (centre, radius) in enumerate(guesses):
             if i == params.max_candidates and best is not None:
                 break  # the large candidate beyond the best is tried where they all fail
-            if tiny and _surround_separation(
-                    image, centre, scale * radius,
-                    _disc_colour(image, centre, scale * radius, params) if colour is None
-                    else colour, params) < 0.5 * _TINY_MIN_SEPARATION:
-                continue  # a ball's stands out by half as much at its rough guess already
+            guess_colour = colour
+            if tiny:
+                # measured here once, for this check and the refinement
+                if guess_colour is None:
+                    guess_colour = _disc_colour(image, centre, scale * radius, params)
+                if _surround_separation(image, centre, scale * radius, guess_colour,
+                                        params) < 0.5 * _TINY_MIN_SEPARATION:
+                    continue  # a ball's stands out by half as much at its rough guess already
             detection = _refine(image, centre, scale * radius, params,
-                                scale * (0.25 * radius + s), colour)
+                                scale * (0.25 * radius + s), guess_colour)
             if not _accept(detection, params) or (
                     retry and detection.confidence < _retry_min_confidence(detection.radius)) or (
                     tiny and _surround_separation(image, detection.center, detection.radius,
