@@ -913,7 +913,8 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     ball is brighter than its surround on one side, darker on another). None if the colour is
     unknown or too grey, the inside of the outline is not of that colour (`_MIN_OWN_SHARE` of
     the fitted disc), nothing around the ball differs from it clearly, or the rays off the
-    outline are not what a partly hidden ball leaves (`_one_hidden_arc`). An outline that only
+    outline are not what a partly hidden ball leaves (`_one_hidden_arc`; the rays the image's
+    border cuts short of the outline left out). An outline that only
     places the fine pass (``placing``) is kept without that last check where it is on
     ``min_confidence`` of its rays: the fine pass, with rays from its centre, makes it."""
     if not _coloured(ball_bgr, params):
@@ -970,9 +971,18 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     if result is None:
         return None
     fit, inliers = result
-    placed = placing and inliers.mean() >= params.min_confidence
+    # a ray the image's border cuts before its edge and the window beyond it (about what
+    # `_edges` needs) found no edge for want of samples: no evidence against the outline, so
+    # left out of the judgement of its arcs (not of its confidence: half a disc cut by the
+    # border is no ball)
+    judged = inliers
+    if in_image.min() < len(t):
+        needed = (_ellipse_distance(fit, center, directions) + max(1.5, 2.5 * sigma)
+                  + _LEVEL_LENGTH / 3.0)
+        judged = inliers[np.isfinite(edge) | (t[np.maximum(in_image - 1, 0)] >= needed)]
+    placed = placing and judged.mean() >= params.min_confidence
     max_hidden = _MAX_HIDDEN_ARC if r0 >= _COARSE_MIN_RADIUS_PX else _MAX_HIDDEN_ARC_SMALL
-    if not placed and not _one_hidden_arc(inliers, max_hidden):
+    if not placed and not _one_hidden_arc(judged, max_hidden):
         return None
     (cx, cy), (fw, fh), angle = fit
     a, b = 0.5 * max(fw, fh), 0.5 * min(fw, fh)

@@ -67,11 +67,13 @@ def test_a_dull_orange_patch_under_jpeg_is_no_ball():
     assert 0.55 < 1.0 - found.colour_bgr.min() / found.colour_bgr.max() < 0.63
 
 
-def test_a_ball_just_inside_the_image_border_is_found():
-    # 2-4 px between its outline and the border: the windows beyond its edge are cut there
+def found_just_inside_the_border(occlusion: float) -> tuple[int, int]:
+    """(found within 0.5 px, frames) of sharp 30 px balls of 24 scenes, their frames cut 2 and 4
+    px right of the outline."""
     found, cases = 0, 0
     for seed in range(24):
-        case = real_case(seed, None, radius_px=30.0, occlusion=0.0, defocus_px=0.0, motion_px=0.0)
+        case = real_case(seed, None, radius_px=30.0, occlusion=occlusion, defocus_px=0.0,
+                         motion_px=0.0)
         for gap_px in (2.0, 4.0):
             right = int(np.ceil(case.center[0] + case.radius + gap_px))
             if right >= case.image.shape[1]:
@@ -80,7 +82,28 @@ def test_a_ball_just_inside_the_image_border_is_found():
             cases += 1
             found += (detection is not None
                       and np.hypot(*(detection.center - case.center)) < 0.5)
+    return found, cases
+
+
+def test_a_ball_just_inside_the_image_border_is_found():
+    # 2-4 px between its outline and the border: the windows beyond its edge are cut there
+    found, cases = found_just_inside_the_border(0.0)
     assert cases >= 40 and found >= 0.9 * cases, (found, cases)  # 83 % before the cut windows
+
+
+def test_a_ball_a_quarter_hidden_by_a_bar_just_inside_the_border_is_found():
+    # the rays the border cuts short of the outline find no edge; with the bar's, they made too
+    # long an arc off the outline, or two (42 of 47 found before they were left out)
+    found, cases = found_just_inside_the_border(0.25)
+    assert cases >= 40 and found >= cases - 1, (found, cases)
+
+
+@pytest.mark.parametrize(('seed', 'quality'), [(234, 95), (109, 75), (299, 50)])
+def test_a_ball_the_border_cuts_close_is_found(seed, quality):
+    # held-out scenes: balls of 21, 84 and 16 px whose outlines come within 3-5 px of the
+    # border, the first two a fifth hidden by a bar: missed before the rays the border cuts
+    # short were left out where the outline's arcs are judged
+    assert centre_error(real_case(seed, quality)) < 1.0
 
 
 def test_a_ball_a_quarter_hidden_by_a_bar_is_found():
@@ -185,11 +208,13 @@ def test_a_large_hidden_ball_is_believed_on_a_long_arc_of_its_outline(
     assert centre_error(case) >= 1.0
 
 
-@pytest.mark.parametrize(('seed', 'quality'), [(75, None), (130, 75), (295, 95)])
+@pytest.mark.parametrize(('seed', 'quality'), [(75, None), (295, 95)])
 def test_a_small_blurred_ball_whose_rays_find_no_outline_is_found_from_its_whole_disc(
         seed, quality, monkeypatch):
     # held-out scenes: balls of 5-7 px, defocused; on their rays the blur leaves too few
-    # samples for the edges' levels, and every candidate is refused
+    # samples for the edges' levels, and every candidate is refused (held-out 130 at JPEG 75 was
+    # a third: 3 px from the border, its rays find it 0.64 px off since those the border cuts
+    # are left out where its arcs are judged)
     case = real_case(seed, quality)
     assert case.radius < 7.5
     assert case.conditions.defocus_px > 0.0 or case.conditions.motion_px > 0.0
