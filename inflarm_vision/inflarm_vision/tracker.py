@@ -37,7 +37,9 @@ Pipeline of `detect_ball` (one frame, whole image; `inflarm_vision/README.md` gi
    ball's; the search stops at one on every ray of the most there are). Where none is
    accepted, each is refined again from 1.3 times its radius (a shaded ball's blob can be half
    its disc), believed on 80 % of the outline; where none is then, the large candidates of the
-   colour mask with its threads cut (a ball joined by a thread to a wider thing of its colour).
+   colour mask with its threads cut (a ball joined by a thread to a wider thing of its colour);
+   where none is then, those of the mask without its orange end (a ball merged with a thing of
+   the orange hues, as coffee's foam), believed on 80 % as the retry's.
    The winner, where it is on less than 90 % of its rays, is **polished** (`_polish`, and so is
    the tracking pass's outline): measured once more in the ball-blind channel with the luma at
    the chroma's resolution (under JPEG the two resolutions bias that channel's half level) and
@@ -1280,8 +1282,8 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     """The candidates of ``region`` (decimated as `DetectorParams.decimation` says) refined
     at full resolution: the accepted one whose outline is on the most rays (or, with
     ``near``, the first accepted in order of distance from it); where none is, the same from
-    a larger radius, then with the colour mask's threads cut, then of its tiny blobs;
-    polished (`_polish`)."""
+    a larger radius, then with the colour mask's threads cut, then without its orange end,
+    then of its tiny blobs; polished (`_polish`)."""
     h, w = image.shape[:2]
     u0, v0, u1, v1 = (int(x) for x in region)
     u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, w), min(v1, h)
@@ -1292,10 +1294,16 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
     small = roi if s == 1 else cv2.resize(roi, ((u1 - u0) // s, (v1 - v0) // s),
                                           interpolation=cv2.INTER_AREA)
     hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
-    mask = cv2.inRange(hsv, params.hsv_lower, params.hsv_upper)
-    if params.opening_px > 1 and params.min_radius_px / s >= params.opening_px:
-        kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+
+    def colour_mask(min_hue: int) -> npt.NDArray[np.uint8]:
+        """The colour mask of the decimated region from hue ``min_hue`` up, opened."""
+        mask = cv2.inRange(hsv, (min_hue,) + params.hsv_lower[1:], params.hsv_upper)
+        if params.opening_px > 1 and params.min_radius_px / s >= params.opening_px:
+            kernel = np.ones((params.opening_px, params.opening_px), np.uint8)
+            mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+        return mask
+
+    mask = colour_mask(params.hsv_lower[0])
 
     # tracking tries the candidates by distance: all of them; a whole-frame search the best,
     # then the best large one (specks of the ball's colour, as on gravel, can outnumber a ball
@@ -1314,6 +1322,11 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
             del guesses[params.max_candidates:]
         return guesses
 
+    def new(guesses: list, tried: list) -> list:
+        """The ``guesses`` not at a candidate ``tried`` already."""
+        return [(centre, radius) for centre, radius in guesses
+                if all(np.hypot(*(centre - at)) >= _NEW_CANDIDATE * radius for at, _ in tried)]
+
     def rounds():
         """``(guesses, radius scale, retry, tiny)`` of each round, the next where one finds
         none."""
@@ -1328,11 +1341,17 @@ def _search(image: npt.NDArray[np.uint8], region: tuple[int, int, int, int],
         # a ball joined by a thread to a wider thing of its colour is none of them (their
         # blob's largest disc is in the wider part): the large candidates of the mask with
         # its threads of 1-2 px cut, those that are new
-        cut = guesses_of(_candidates(cv2.morphologyEx(mask, cv2.MORPH_OPEN, _THREAD_CUT),
-                                     hsv[:, :, 1], s, 2.0 * params.min_radius_px, params, limit))
-        yield [(centre, radius) for centre, radius in cut
-               if all(np.hypot(*(centre - tried)) >= _NEW_CANDIDATE * radius
-                      for tried, _ in guesses)], 1.0, False, False
+        cut = new(guesses_of(_candidates(cv2.morphologyEx(mask, cv2.MORPH_OPEN, _THREAD_CUT),
+                                         hsv[:, :, 1], s, 2.0 * params.min_radius_px, params,
+                                         limit)), guesses)
+        yield cut, 1.0, False, False
+        # a ball beside a thing of the mask's orange end (coffee's foam, a cat's fur) merges
+        # with it, and the blob's largest disc is in the thing: the large candidates of the
+        # mask without its orange end (`_ORANGE_HUES`), those that are new, believed as the
+        # retry's (specks of the yellow hues in fur and gravel are many, their outlines short)
+        yellow = colour_mask(params.hsv_lower[0] + _ORANGE_HUES)
+        yield new(guesses_of(_candidates(yellow, hsv[:, :, 1], s, 2.0 * params.min_radius_px,
+                                         params, limit)), guesses + cut), 1.0, True, False
         # a blob of a few pixels (`_tiny_candidates`): the lit part of a small dark ball whose
         # shaded part is under the value threshold, a defocused ball's core; refined as the
         # first ones, and believed only where the ball's colour stands out clearly from its

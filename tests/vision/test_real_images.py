@@ -4,6 +4,7 @@ Its figures per condition are the benchmark's (``benchmarks/bench_vision.py``) a
 README's; the tests hold what must never regress: no ball is ever found in the ball-free
 photographs, and the set is the scene it says at every JPEG quality."""
 
+from dataclasses import replace
 import math
 
 import cv2
@@ -170,13 +171,15 @@ def test_a_ball_whose_colour_blob_is_smaller_than_it_is_found_from_a_larger_radi
     assert centre_error(case) >= 1.0
 
 
-@pytest.mark.parametrize(('seed', 'quality'), [(110, None), (110, 95), (222, 50), (303, 95)])
+@pytest.mark.parametrize(('seed', 'quality'),
+                         [(110, None), (110, 95), (222, 50), (303, 95), (316, 75)])
 def test_a_ball_whose_blob_is_joined_by_threads_to_a_wider_one_is_found(seed, quality,
                                                                         monkeypatch):
     # a 26 px ball beside the space shuttle, joined by a thread 1 px wide to the external
     # tank's blob, which is wider than the ball; balls of 18 and 51 px on a cup's orange rim
-    # and in a cat's eye, their blobs joined to the surround's: each blob's largest disc is
-    # elsewhere, and the ball is found with the threads of the colour mask cut
+    # and in a cat's eye, and of 5 px among gravel's specks, their blobs joined to the
+    # surround's: each blob's largest disc is elsewhere, and the ball is found with the
+    # threads of the colour mask cut
     case = real_case(seed, quality)
     mask = tracker._threshold(case.image, DetectorParams())
     _, labels, stats, _ = cv2.connectedComponentsWithStats(mask)
@@ -184,8 +187,33 @@ def test_a_ball_whose_blob_is_joined_by_threads_to_a_wider_one_is_found(seed, qu
     blob = stats[labels[v, u]]
     assert max(blob[cv2.CC_STAT_WIDTH], blob[cv2.CC_STAT_HEIGHT]) > 2.8 * case.radius
     assert centre_error(case) < 1.0
-    # cutting nothing, the ball is missed
+    # cutting nothing, the ball is missed (with the whole mask only: the mask without its
+    # orange end separates the three larger balls too, not the small one)
     monkeypatch.setattr(tracker, '_THREAD_CUT', np.ones((1, 1), np.uint8))
+    monkeypatch.setattr(tracker, '_ORANGE_HUES', 0)
+    assert centre_error(case) == math.inf
+
+
+@pytest.mark.parametrize('quality', [75, 50])
+def test_a_ball_merged_with_a_thing_of_the_colour_masks_orange_end_is_found_without_it(
+        quality, monkeypatch):
+    # a held-out scene: an 18 px ball on a cup's foam, whose hues are the colour mask's lowest
+    # (17-20); under JPEG no thread joins the ball's blob to the foam's, whose largest disc is
+    # elsewhere; in the mask without its orange end, the ball's blob is its own
+    case = real_case(303, quality)
+    params = DetectorParams()
+    yellow = replace(params, hsv_lower=(params.hsv_lower[0] + tracker._ORANGE_HUES,)
+                     + params.hsv_lower[1:])
+    u, v = (int(round(x)) for x in case.center + (0.8 * case.radius, 0.0))
+    for mask_params, largest_disc_off in ((params, True), (yellow, False)):
+        _, labels = cv2.connectedComponents(tracker._threshold(case.image, mask_params))
+        distance = cv2.distanceTransform((labels == labels[v, u]).astype(np.uint8),
+                                         cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        peak = np.unravel_index(np.argmax(distance), distance.shape)[::-1]
+        assert (np.hypot(*(peak - case.center)) > case.radius) == largest_disc_off
+    assert centre_error(case) < 1.0
+    # with the whole mask only, the ball is missed
+    monkeypatch.setattr(tracker, '_ORANGE_HUES', 0)
     assert centre_error(case) == math.inf
 
 
