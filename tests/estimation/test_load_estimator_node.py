@@ -7,6 +7,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PointStamped, WrenchStamped
 import numpy as np
 import rclpy
+from rclpy.event_handler import QoSSubscriptionEventType
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -124,6 +125,15 @@ def test_diagnostics_aggregate_about_once_a_second(executor):
     samples = sum(int(kv.value) for d in rig.out['diagnostics'] for kv in d.status[0].values
                   if kv.key == 'samples')
     assert samples == 30 and 'converged' in values
+
+
+def test_no_subscription_takes_message_lost_events(executor):
+    """Taking one can deadlock the node under steady losses (rmw_fastrtps 8.4: it hung in
+    ``take_event`` at 1 kHz, `inflarm_msgs_json.ros.qos.subscription_events`)."""
+    rig = Rig(executor)
+    kinds = {h.event_type for s in rig.node.subscriptions for h in s.event_handlers}
+    assert QoSSubscriptionEventType.RCL_SUBSCRIPTION_REQUESTED_INCOMPATIBLE_QOS in kinds
+    assert QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST not in kinds
 
 
 def test_a_singular_configuration_is_reported_not_estimated(executor):

@@ -26,9 +26,10 @@ Publishes (only for samples whose estimate converged, stamped with the sample's 
         JSON message per link and sample at 1 kHz would cost more than the estimate).
 Publishes always:
     diagnostics (diagnostic_msgs/DiagnosticArray, about 1 Hz): samples, estimates and
-        rejections since the last report, statuses, cold starts, samples lost in transport,
-        the scheduling it runs under (``SCHED_FIFO 50`` by default, `spin_node`), the latest
-        status, alternatives and conditioning. A report with no sample since the
+        rejections since the last report (``samples_total`` against the publisher's count
+        gives the samples lost before the node), statuses, cold starts, the scheduling it
+        runs under (``SCHED_FIFO 50`` by default, `spin_node`), the latest status,
+        alternatives and conditioning. A report with no sample since the
         last one, the last sample older than ``stall_timeout_s`` (steady clock), says the
         stream stalled (level STALE) and for how long; before the first sample, WARN.
 Parameters:
@@ -78,7 +79,7 @@ from inflarm_msgs_json.ros.diagnostics import (
 )
 from inflarm_msgs_json.ros.node import GuardedCallbacks
 from inflarm_msgs_json.ros.parameters import Parameter, declare_parameters
-from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS, subscription_events
+from inflarm_msgs_json.ros.qos import JOINT_STATE_QOS, RELIABLE_QOS
 from inflarm_msgs_json.ros.spin import scheduling, spin_node
 
 PARAMETERS = ARM_PARAMETERS + (
@@ -126,14 +127,11 @@ class LoadEstimator(GuardedCallbacks, Node):
         self.tracker = self.make_tracker()
         self.statuses: Counter[str] = Counter()  # estimate statuses since the last diagnostics
         self.samples_total = 0
-        self.lost_total = 0  # samples DDS reports lost before they reached the node
         self.last_estimate = None
         self.last_sample_at: float | None = None  # time.monotonic() of the last message [s]
         self.last_pose: tuple[object, np.ndarray, np.ndarray] | None = None  # stamp, q, force
         self.create_guarded_subscription(
-            JointState, 'joint_states', self.on_joint_states, JOINT_STATE_INPUT_QOS,
-            event_callbacks=subscription_events(self, 'joint_states',
-                                                message_lost=self.on_message_lost))
+            JointState, 'joint_states', self.on_joint_states, JOINT_STATE_INPUT_QOS)
         # One message of each output, refilled per sample: at 1 kHz building new ones would
         # cost more than the estimate (rclpy copies a message when it publishes it).
         self.pose_msg = JointState(name=list(FlexibleArm.JOINT_NAMES))
@@ -160,9 +158,6 @@ class LoadEstimator(GuardedCallbacks, Node):
 
     def on_parameters_set(self, changed: dict) -> None:
         self.tracker = self.make_tracker()  # a new model: the history no longer applies
-
-    def on_message_lost(self, event) -> None:
-        self.lost_total += event.total_count_change
 
     def on_joint_states(self, msg: JointState) -> None:
         self.last_sample_at = time.monotonic()  # the stream is alive, even if this one is bad
@@ -235,7 +230,7 @@ class LoadEstimator(GuardedCallbacks, Node):
         status = diagnostic_status(
             'load_estimator: elastostatic estimate', 'inflatable_arm', level, message,
             samples=samples, converged=converged, samples_total=self.samples_total,
-            rejected_samples_total=rejected, lost_samples_total=self.lost_total,
+            rejected_samples_total=rejected,
             cold_starts_total=self.tracker.cold_starts, scheduling=scheduling(),
             # in 0.1 s steps: what a stall needs, and the same in every replay of a recording
             seconds_since_sample=round(silent, 1),

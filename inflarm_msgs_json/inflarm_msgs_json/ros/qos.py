@@ -37,7 +37,16 @@ LATCHED_QOS = QoSProfile(
 
 def subscription_events(node: Node, topic: str, **callbacks) -> SubscriptionEventCallbacks:
     """Callbacks logging an incompatible publisher, which otherwise drops data silently; other
-    event callbacks (e.g. ``message_lost``) may be added."""
+    event callbacks (e.g. ``matched``) may be added, but not ``message_lost``.
+
+    rmw_fastrtps 8.4 (Jazzy) takes a message-lost event under its event mutex and then the
+    reader's, while a DDS thread reporting a new loss holds them the other way round: under
+    steady losses the node deadlocks in ``take_event`` (ros2/rmw_fastrtps#890; it hung
+    ``load_estimator`` at 1 kHz)."""
+    if 'message_lost' in callbacks:
+        raise ValueError(f"subscription '{topic}': no message_lost callback: rmw_fastrtps 8.4 "
+                         'can deadlock taking that event (ros2/rmw_fastrtps#890)')
+
     def on_incompatible(event) -> None:
         node.get_logger().error(
             f"subscription '{topic}': incompatible QoS offered by a publisher "
