@@ -267,6 +267,7 @@ _DISC_MAX_RADIUS_PX = 12.0  # largest candidate whose disc is fitted where its r
 _MOVED_PX = 0.25  # a fine outline this far from its start is measured again from it [px]
 _FINE_REPEATS = 2  # at most this many times
 _LEVEL_LENGTH = 4.0  # length of the windows the edge's inside and outside levels come from [px]
+_LEVEL_SAMPLES = int(round(_LEVEL_LENGTH / _STEP)) + 1  # samples of such a window
 _POLISH_MAX_MOVE_PX = 1.5  # a polished outline farther from the accepted one is another one [px]
 
 
@@ -372,6 +373,21 @@ def _circular_mean(values: npt.NDArray, valid: npt.NDArray[np.bool_]) -> npt.NDA
 
 
 @numba.njit(**_JIT)
+def _level_gap(sigma: float) -> int:
+    """Samples between an edge of blur ``sigma`` [px] and the windows its levels come from
+    (`_edges`): beyond the blur's reach, 2.5 ``sigma`` and 1.5 px at least."""
+    return int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
+
+
+@numba.njit(**_JIT)
+def _samples_beyond_edge(sigma: float) -> int:
+    """How many samples of a ray must be in the image beyond an edge of blur ``sigma`` for
+    `_edges` to find it: the gap to the window of the outside level and a third of that window
+    (the rest may be cut by the image's border: a ball near it)."""
+    return _level_gap(sigma) + _LEVEL_SAMPLES // 3
+
+
+@numba.njit(**_JIT)
 def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: float,
            inside_level: float, usable: npt.NDArray[np.int64], sigma: float,
            min_contrast: float) -> tuple[npt.NDArray[np.float64], float]:
@@ -418,16 +434,13 @@ def _edges(signal: npt.NDArray[np.float32], t0: float, r0: float, half_width: fl
         measured = widths[np.isfinite(widths)]
         sigma = max(np.median(measured) / 1.349, 0.3) if len(measured) else 0.7
     # local levels around the first edge
-    length = int(round(_LEVEL_LENGTH / _STEP)) + 1
-    gap = int(math.ceil(max(1.5, 2.5 * sigma) / _STEP))
+    length, gap, beyond = _LEVEL_SAMPLES, _level_gap(sigma), _samples_beyond_edge(sigma)
     valid = np.zeros(n_rays, np.bool_)
     k = np.full(n_rays, gap)
     for i in range(n_rays):
         if math.isfinite(edge[i]):
             ki = int(np.rint((edge[i] - t0) / _STEP))
-            # the window beyond the edge may be cut by the image's border, to a third of its
-            # length
-            if gap <= ki < usable[i] - gap - length // 3:
+            if gap <= ki < usable[i] - beyond:
                 valid[i], k[i] = True, ki
     if not valid.any():
         return np.full(n_rays, np.nan), sigma
@@ -973,14 +986,13 @@ def _refine_at(image: npt.NDArray[np.uint8], center: npt.NDArray[np.float64], r0
     if result is None:
         return None
     fit, inliers = result
-    # a ray the image's border cuts before its edge and the window beyond it (about what
-    # `_edges` needs) found no edge for want of samples: no evidence against the outline, so
-    # left out of the judgement of its arcs (not of its confidence: half a disc cut by the
-    # border is no ball)
+    # a ray the image's border cuts before its edge and what `_edges` needs beyond it found
+    # no edge for want of samples: no evidence against the outline, so left out of the
+    # judgement of its arcs (not of its confidence: half a disc cut by the border is no ball)
     judged = inliers
     if in_image.min() < len(t):
-        needed = (_ellipse_distance(fit, center, directions) + max(1.5, 2.5 * sigma)
-                  + _LEVEL_LENGTH / 3.0)
+        needed = (_ellipse_distance(fit, center, directions)
+                  + _STEP * _samples_beyond_edge(sigma))
         judged = inliers[np.isfinite(edge) | (t[np.maximum(in_image - 1, 0)] >= needed)]
     placed = placing and judged.mean() >= params.min_confidence
     max_hidden = _MAX_HIDDEN_ARC if r0 >= _COARSE_MIN_RADIUS_PX else _MAX_HIDDEN_ARC_SMALL
@@ -1547,3 +1559,4 @@ def warm_up() -> None:
     if _fit_disc(small, np.array([20.0, 20.0]), 5.0, np.array([0.0, 200.0, 230.0]),
                  DetectorParams()) is None:
         raise RuntimeError('warm_up: the disc fit missed a small blurred yellow disc')
+    _samples_beyond_edge(1.0)  # `_refine_at` calls it only for a ball near the border

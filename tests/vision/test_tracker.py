@@ -268,6 +268,27 @@ def test_edges_finds_the_outline_of_a_blurred_disc_and_its_blur():
         assert np.isnan(edge).all()
 
 
+def test_a_ray_the_border_cuts_finds_its_edge_exactly_where_it_has_what_edges_needs():
+    # `_refine_at` leaves a ray that the image's border cuts out of the judgement of an
+    # outline's arcs where it ends before `_samples_beyond_edge` past the outline: that must be
+    # exactly where `_edges` stops finding its edge, for any blur (each ray a blurred disc's
+    # profile, as above, its edge on a sample)
+    from scipy.stats import rice
+
+    from inflarm_vision import tracker
+
+    radius, t0 = 20.0, 8.0
+    t = np.arange(t0, 40.0, tracker._STEP)
+    edge_k = int(round((radius - t0) / tracker._STEP))
+    for sigma in np.arange(0.3, 2.0, 0.02):
+        signal = np.tile(120.0 * rice.sf(radius, t / sigma, scale=sigma), (8, 1))
+        needed = radius + tracker._STEP * tracker._samples_beyond_edge(sigma)
+        for usable in range(edge_k, len(t) + 1):
+            edge, _ = tracker._edges(signal.astype(np.float32), t0, 21.0, 6.0, 0.0,
+                                     np.full(8, usable), sigma, np.nan)
+            assert np.isfinite(edge).all() == (t[usable - 1] >= needed), (sigma, usable)
+
+
 def test_the_robust_circle_keeps_the_outline_and_drops_what_hides_it():
     # points on a circle with noise, a quarter of them moved by an occluder: the inliers are
     # the points on the circle, and the fit is scipy's geometric least squares through them
@@ -335,5 +356,6 @@ def test_warm_up_compiles_the_kernels_the_detector_calls():
     tracker.warm_up()
     # the numba dispatchers Python calls (the others are compiled into them)
     for kernel in (tracker._edges, tracker._fit_circle, tracker._fisher, tracker._separation,
-                   tracker._blurred_disc, tracker._fit_blurred_disc, tracker._crossing):
+                   tracker._blurred_disc, tracker._fit_blurred_disc, tracker._crossing,
+                   tracker._samples_beyond_edge):
         assert kernel.signatures, kernel.__name__
