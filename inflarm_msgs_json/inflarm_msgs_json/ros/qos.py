@@ -42,7 +42,8 @@ def subscription_events(node: Node, topic: str, **callbacks) -> SubscriptionEven
     rmw_fastrtps 8.4 (Jazzy) takes a message-lost event under its event mutex and then the
     reader's, while a DDS thread reporting a new loss holds them the other way round: under
     steady losses the node deadlocks in ``take_event`` (ros2/rmw_fastrtps#890; it hung
-    ``load_estimator`` at 1 kHz)."""
+    ``load_estimator`` at 1 kHz). A match is reported without the reader's mutex held: that
+    event is safe (the main README, "Launching systems")."""
     if 'message_lost' in callbacks:
         raise ValueError(f"subscription '{topic}': no message_lost callback: rmw_fastrtps 8.4 "
                          'can deadlock taking that event (ros2/rmw_fastrtps#890)')
